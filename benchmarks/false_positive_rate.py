@@ -27,7 +27,7 @@ from pipeline.adis16364 import (
     burst_counts,
 )
 from pipeline.allan import allan_curves
-from pipeline.loop import AxisSignals, close_loop
+from pipeline.loop import AxisSignals, aux_block_means, close_loop
 from pipeline.scenario import AXES, Scenario, Temperature, sensor_of, si_per_unit
 from pipeline.simulator import VirtualADIS16364
 
@@ -69,7 +69,14 @@ def main() -> None:
         start = time.perf_counter()
         curves = allan_curves(y, tau0)
         for i, (axis, curve) in enumerate(zip(AXES, curves, strict=True)):
-            sig = AxisSignals(axis, sensor_of(axis), y[:, i], tau0, temp, supply)
+            sig = AxisSignals(
+                axis,
+                sensor_of(axis),
+                y[:, i],
+                tau0,
+                aux_block_means(temp, tau0),
+                aux_block_means(supply, tau0),
+            )
             accepted = [e["kind"] for e in close_loop(sig, curve).as_effects()]
             kinds.update(accepted)
             per_axis[axis] += bool(accepted)

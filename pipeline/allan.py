@@ -52,38 +52,77 @@ Rates = np.ndarray | Sequence[np.ndarray]
 columns of a polars frame, without copying them into one matrix)."""
 
 
+@dataclass(frozen=True)
+class SparseCorrection:
+    """Values to subtract from a 1-D rate series at a few samples (e.g. spikes replaced by the
+    median), applied on the fly: a corrected 24 h / 1 kHz copy would cost 691 MB.
+
+    ``index``: int64 sample indices, strictly increasing; ``value``: float64, unit of the rate.
+    """
+
+    index: np.ndarray
+    value: np.ndarray
+
+    def within(self, start: int, stop: int) -> SparseCorrection:
+        """The corrections of samples ``[start, stop)``, indexed from ``start``."""
+        lo, hi = np.searchsorted(self.index, [start, stop])
+        return SparseCorrection(self.index[lo:hi] - start, self.value[lo:hi])
+
+
+_NONE = SparseCorrection(np.empty(0, np.int64), np.empty(0))
+
+
 def _columns(y: Rates) -> list[np.ndarray]:
     if isinstance(y, np.ndarray):
         return [y] if y.ndim == 1 else [y[:, a] for a in range(y.shape[1])]
     return list(y)
 
 
-def phase(y: Rates, tau0: float) -> np.ndarray:
+def _single(cols: list[np.ndarray], correction: SparseCorrection | None) -> SparseCorrection:
+    if correction is None:
+        return _NONE
+    if len(cols) != 1:
+        raise ValueError("a SparseCorrection applies to one 1-D rate series")
+    return correction
+
+
+def phase(y: Rates, tau0: float, correction: SparseCorrection | None = None) -> np.ndarray:
     """Phase of rate samples ``y``: x = tau0*cumsum(y - mean), x_0 = 0.
 
     Returned axis-major, shape (k, n + 1) (or (n + 1,) for 1-D input), C-contiguous so each
     axis' phase is one contiguous row for :func:`_sum_sq_second_diff`.  Units: those of y times
-    seconds (e.g. rad for a gyro in rad/s).  NIST SP 1065 eq. (1).
+    seconds (e.g. rad for a gyro in rad/s).  NIST SP 1065 eq. (1).  ``correction`` (1-D ``y``
+    only) is subtracted from y first.
     """
     cols = _columns(y)
+    fix = _single(cols, correction)
     x = np.empty((len(cols), len(cols[0]) + 1))
     for row, col in zip(x, cols, strict=True):
-        _integrate(np.asarray(col, dtype=np.float64), tau0, row)
+        _integrate(np.asarray(col, dtype=np.float64), tau0, row, fix.index, fix.value)
     return x[0] if isinstance(y, np.ndarray) and y.ndim == 1 else x
 
 
 @numba.njit(cache=True, nogil=True)
-def _integrate(y: np.ndarray, tau0: float, x: np.ndarray) -> None:  # pragma: no cover (JIT)
-    """x[0] = 0, x[i + 1] = tau0 * sum_{j <= i} (y[j] - mean(y)): one pass for the mean, one
-    for the running sum."""
+def _integrate(
+    y: np.ndarray, tau0: float, x: np.ndarray, fix_index: np.ndarray, fix_value: np.ndarray
+) -> None:  # pragma: no cover (JIT)
+    """x[0] = 0, x[i + 1] = tau0 * sum_{j <= i} (y'[j] - mean(y')) with y' = y minus
+    ``fix_value`` at ``fix_index``: one pass for the mean, one for the running sum."""
     mean = 0.0
     for value in y:
         mean += value
+    for value in fix_value:
+        mean -= value
     mean /= y.size
     acc = 0.0
     x[0] = 0.0
+    k = 0
     for i in range(y.size):
-        acc += y[i] - mean
+        v = y[i]
+        if k < fix_index.size and fix_index[k] == i:
+            v -= fix_value[k]
+            k += 1
+        acc += v - mean
         x[i + 1] = acc * tau0
 
 
@@ -130,19 +169,24 @@ def _axis_groups(n: int, k: int) -> list[slice]:
     return [slice(a, min(a + per_group, k)) for a in range(0, k, per_group)]
 
 
-def oadev(y: Rates, tau0: float, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def oadev(
+    y: Rates, tau0: float, m: np.ndarray, correction: SparseCorrection | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Overlapping Allan deviation of rate samples ``y`` at tau = m * tau0.
 
     ``y`` is (n,) or (n, k) (k axes at once), sample interval ``tau0`` in seconds; ``m`` the
-    averaging factors (1 <= m <= n // 2).  Returns ``adev`` with shape (len(m),) or
-    (len(m), k), in the unit of y, and ``n_terms`` = N - 2m (N = n + 1 phase points).
-    NIST SP 1065 eq. (11).
+    averaging factors (1 <= m <= n // 2); ``correction`` (1-D ``y`` only) is subtracted from y.
+    Returns ``adev`` with shape (len(m),) or (len(m), k), in the unit of y, and ``n_terms`` =
+    N - 2m (N = n + 1 phase points).  NIST SP 1065 eq. (11).
     """
     cols = _columns(y)
     n = len(cols[0])
     m = _checked_factors(m, n)
     adev = np.concatenate(
-        [_oadev_of_phase(phase(cols[g], tau0), tau0, m) for g in _axis_groups(n, len(cols))],
+        [
+            _oadev_of_phase(phase(cols[g], tau0, correction), tau0, m)
+            for g in _axis_groups(n, len(cols))
+        ],
         axis=1,
     )
     one_d = isinstance(y, np.ndarray) and y.ndim == 1
@@ -174,19 +218,21 @@ def allan_curves(
     tau0: float,
     m: np.ndarray | None = None,
     confidence: float = 0.683,
+    correction: SparseCorrection | None = None,
 ) -> list[AllanCurve]:
     """Overlapping ADEV with Stable32-style intervals for each axis of ``y`` (see :data:`Rates`).
 
-    ``m`` defaults to :func:`tau_factors`.  Per tau: noise type by
-    :func:`pipeline.edf.noise_ids`, edf by :func:`pipeline.edf.edf_oadev`, interval by
-    :func:`pipeline.edf.chi2_interval` at ``confidence`` (0.683, Stable32's default).
+    ``m`` defaults to :func:`tau_factors`; ``correction`` (one axis only) is subtracted from
+    y.  Per tau: noise type by :func:`pipeline.edf.noise_ids`, edf by
+    :func:`pipeline.edf.edf_oadev`, interval by :func:`pipeline.edf.chi2_interval` at
+    ``confidence`` (0.683, Stable32's default).
     """
     cols = _columns(y)
     n = len(cols[0])
     m = tau_factors(n) if m is None else _checked_factors(m, n)
     curves: list[AllanCurve] = []
     for group in _axis_groups(n, len(cols)):
-        x = phase(cols[group], tau0)
+        x = phase(cols[group], tau0, correction)
         adev = _oadev_of_phase(x, tau0, m)
         for i in range(x.shape[0]):
             alpha = noise_ids(x[i], m)

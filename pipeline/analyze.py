@@ -21,7 +21,7 @@ from pipeline.condition import ConditionedSeries, condition
 from pipeline.decode import ImuRecording, decode, mcap_files
 from pipeline.errors import TooFewFramesError
 from pipeline.ieee952 import fit_noise_terms
-from pipeline.loop import AxisSignals, close_loop
+from pipeline.loop import AxisSignals, aux_block_means, close_loop
 from pipeline.progress import StageProgress
 from pipeline.results import AXES, AnalysisResult, AxisResult, InputSummary, sensor_of
 
@@ -73,11 +73,13 @@ def axis_result(
     y: np.ndarray,
     curve: AllanCurve,
     tau0_s: float,
-    temp_c: np.ndarray | None,
-    supply_v: np.ndarray | None,
+    temp_d: np.ndarray | None,
+    supply_d: np.ndarray | None,
     loop: bool,
 ) -> AxisResult:
-    """Stage 4 (+ loop) of one axis: mean, rms, IEEE 952 terms and the closed loop."""
+    """Stage 4 (+ loop) of one axis: mean, rms, IEEE 952 terms and the closed loop
+    (``temp_d``, ``supply_d``: the segment's temperature and supply as
+    :func:`pipeline.loop.aux_block_means`)."""
     sensor = sensor_of(name)
     return AxisResult(
         name=name,
@@ -87,7 +89,7 @@ def axis_result(
         rms=float(y.std()),
         curve=curve,
         terms=fit_noise_terms(curve, sensor),
-        loop=close_loop(AxisSignals(name, sensor, y, tau0_s, temp_c, supply_v), curve)
+        loop=close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d), curve)
         if loop
         else None,
     )
@@ -124,13 +126,13 @@ def analyze_series(
     with progress.stage("allan", len(axes), "axes") as advance:
         curves = allan_curves(y, series.tau0_s, m)
         advance(len(axes))
-    temp_c = housekeeping(series.frames, "temp_c")
-    supply_v = housekeeping(series.frames, "supply_v")
+    temp_d = aux_block_means(housekeeping(series.frames, "temp_c"), series.tau0_s)
+    supply_d = aux_block_means(housekeeping(series.frames, "supply_v"), series.tau0_s)
     results: dict[str, AxisResult] = {}
     with progress.stage("noise fit", len(axes), "axes") as advance:
         for i, (name, curve) in enumerate(zip(axes, curves, strict=True)):
             results[name] = axis_result(
-                name, y[i], curve, series.tau0_s, temp_c, supply_v, options.loop
+                name, y[i], curve, series.tau0_s, temp_d, supply_d, options.loop
             )
             advance(i + 1)
     return AnalysisResult(input=input_summary(rec, series, n), axes=results, device=rec.device)

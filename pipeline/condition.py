@@ -19,6 +19,7 @@ from typing import Literal
 import numpy as np
 import polars as pl
 
+from pipeline import robust
 from pipeline.decode import ImuRecording
 from pipeline.errors import ImupipeError
 from pipeline.results import AXES
@@ -82,23 +83,74 @@ def stuck_warning(axis: str) -> str:
     return f"{axis} is constant over the segment (stuck channel?): it is not analysed"
 
 
-def _mad(dt: np.ndarray) -> float:
-    """Median absolute deviation of ``dt`` with one temporary of its size (24 h at 1 kHz:
-    0.69 GB; ``np.median(np.abs(dt - np.median(dt)))`` makes four)."""
-    work = dt.copy()
-    med = np.median(work, overwrite_input=True)
-    np.subtract(dt, med, out=work)
-    np.abs(work, out=work)
-    return float(np.median(work, overwrite_input=True))
+_CHUNK = 1 << 22
+"""Stamp steps examined at a time: the steps of a 24 h / 1 kHz record are never held whole
+(their float64 array alone would be 691 MB)."""
 
 
-def _nominal_rate(rec: ImuRecording, dt: np.ndarray) -> float:
+def _nominal_rate(rec: ImuRecording, t: np.ndarray) -> float:
+    """The device's configured rate, else 1 / the median of the increasing stamp steps."""
     if "output_rate_hz" in rec.device:
         return float(rec.device["output_rate_hz"])
-    positive = dt[dt > 0]
-    if len(positive) == 0:
+    step = robust.median_positive(t, differences=True)
+    if not step > 0:
         raise ImupipeError(f"{rec.path}: cannot tell the sample rate (no increasing stamps)")
-    return 1.0 / float(np.median(positive, overwrite_input=True))  # positive is a copy
+    return 1.0 / step
+
+
+def _breaks(
+    t: np.ndarray, counter: np.ndarray | None, threshold: float, period: float
+) -> tuple[np.ndarray, dict[str, int]]:
+    """Where the uniform sampling breaks, (n + 1,) bool (True at 0, n and before every row that
+    does not follow its predecessor by one period), and the counts of each kind of break.
+
+    A step of the stamps ``t`` (s) is a break when it is zero (duplicate stamp), negative
+    (stamp going backwards), longer than ``threshold`` (a gap; not the long step right after a
+    bad stamp, which makes up for it) or when the u32 frame ``counter`` (if any) does not step
+    by one modulo 2**32.  Missed frames: from the counter, else from the gap lengths in
+    ``period`` units.  The steps are examined :data:`_CHUNK` at a time.
+    """
+    n = len(t)
+    breaks = np.zeros(n + 1, dtype=bool)
+    breaks[0] = breaks[n] = True
+    counts = dict.fromkeys(("gaps", "missed_frames", "duplicate_stamps", "non_monotonic_stamps"), 0)
+    if counter is not None:
+        counts["counter_wraps"] = 0
+    after_bad = False  # the previous chunk ended on a duplicate or backwards stamp
+    for i in range(0, n - 1, _CHUNK):
+        j = min(i + _CHUNK, n - 1)
+        d = np.diff(t[i : j + 1])
+        duplicate, backwards = d == 0, d < 0
+        gap = d > threshold
+        gap[0] &= not after_bad
+        gap[1:] &= ~(duplicate | backwards)[:-1]
+        after_bad = bool(duplicate[-1] or backwards[-1])
+        brk = duplicate | backwards | gap
+        counts["duplicate_stamps"] += int(np.count_nonzero(duplicate))
+        counts["non_monotonic_stamps"] += int(np.count_nonzero(backwards))
+        if counter is None:
+            counts["gaps"] += int(np.count_nonzero(gap))
+            counts["missed_frames"] += int(np.sum(np.round(d[gap] / period) - 1))
+        else:
+            c = counter[i : j + 1].astype(np.uint32, copy=False)
+            step = np.diff(c)  # uint32 arithmetic wraps as the counter does
+            jump = step != 1
+            counts["counter_wraps"] += int(np.count_nonzero(c[1:] < c[:-1]))
+            counts["missed_frames"] += int(np.sum(step[jump & (step > 1)] - np.int64(1)))
+            counts["gaps"] += int(np.count_nonzero(gap | (jump & ~duplicate)))
+            brk |= jump
+        breaks[i + 1 : j + 1] = brk
+    return breaks, counts
+
+
+def _step_jitter(t: np.ndarray) -> float:
+    """Standard deviation of the stamp steps np.std(np.diff(t)), :data:`_CHUNK` at a time."""
+    mean = (t[-1] - t[0]) / (len(t) - 1)  # the steps' mean, by telescoping
+    total = sum(
+        float(np.sum((np.diff(t[i : i + _CHUNK + 1]) - mean) ** 2))
+        for i in range(0, len(t) - 1, _CHUNK)
+    )
+    return float(np.sqrt(total / (len(t) - 1)))
 
 
 def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -> ConditionedSeries:
@@ -108,11 +160,9 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
     if n < 2:
         raise ImupipeError(f"{rec.path}: {n} frame(s), too few for any averaging time")
     t = df["t_s"].to_numpy()
-    dt = np.diff(t)
-    rate = _nominal_rate(rec, dt)
+    rate = _nominal_rate(rec, t)
     period = 1.0 / rate
     warnings = list(rec.warnings)
-    counts: dict[str, int] = {}
 
     if "nonfinite" in df.columns:  # a frame decoded without its axes (pipeline.lowmem)
         nonfinite = df["nonfinite"].to_numpy()
@@ -121,42 +171,21 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
         for a in AXES:
             nonfinite |= ~np.isfinite(df[a].to_numpy())
     saturated = df["saturated"].to_numpy()
-    flagged = df["flag_ea"].to_numpy() & ~saturated
-    stale = ~df["flag_nd"].to_numpy()
-
-    duplicate = dt == 0
-    backwards = dt < 0
-    mad_sigma = 1.4826 * _mad(dt)
-    gap = dt > max(GAP_FACTOR * period, period + JITTER_SIGMAS * mad_sigma)
-    gap[1:] &= ~(duplicate | backwards)[:-1]  # the long step that makes up for a bad stamp
+    mad_sigma = robust.MAD_TO_SIGMA * robust.mad(t, differences=True)
+    threshold = max(GAP_FACTOR * period, period + JITTER_SIGMAS * mad_sigma)
     counter = df["counter"].to_numpy() if df["counter"].null_count() == 0 else None
-    if counter is not None:
-        step = np.diff(counter.astype(np.int64))
-        counts["counter_wraps"] = int(np.count_nonzero(step < 0))
-        step %= 1 << 32  # the u32 counter wraps
-        counter_jump = step != 1
-        missed = int(np.sum(step[counter_jump & (step > 1)] - 1))
-    else:
-        counter_jump = np.zeros(n - 1, dtype=bool)
-        missed = int(np.sum(np.round(dt[gap] / period) - 1))
-
-    bad_row = nonfinite | saturated
-    breaks = np.zeros(n + 1, dtype=bool)
-    breaks[0] = breaks[n] = True
-    breaks[1:n] |= duplicate | backwards | gap | counter_jump
+    breaks, counts = _breaks(t, counter, threshold, period)
     counts.update(
         {
             "frames": n,
-            "gaps": int(np.count_nonzero(gap | (counter_jump & ~duplicate))),
-            "missed_frames": missed,
-            "duplicate_stamps": int(np.count_nonzero(duplicate)),
-            "non_monotonic_stamps": int(np.count_nonzero(backwards)),
             "nonfinite_frames": int(np.count_nonzero(nonfinite)),
             "saturated_frames": int(np.count_nonzero(saturated)),
-            "flagged_frames": int(np.count_nonzero(flagged)),
-            "stale_frames": int(np.count_nonzero(stale)),
+            "flagged_frames": int(np.count_nonzero(df["flag_ea"].to_numpy() & ~saturated)),
+            "stale_frames": int(np.count_nonzero(~df["flag_nd"].to_numpy())),
         }
     )
+    bad_row = nonfinite | saturated
+    del nonfinite, saturated
 
     # Segment boundaries: a break between rows, and bad rows removed entirely.
     edges = np.flatnonzero(breaks)
@@ -202,7 +231,7 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
     seg_t = t[seg.start : seg.stop]
     tau0 = (seg_t[-1] - seg_t[0]) / (seg.frames - 1) if seg.frames > 1 else period
     if seg.frames > 2:
-        jitter = float(np.std(np.diff(seg_t))) / tau0
+        jitter = _step_jitter(seg_t) / tau0
         counts["jitter_ppm"] = round(jitter * 1e6)
         if jitter > JITTER_WARN:
             warnings.append(

@@ -30,13 +30,15 @@ import numpy as np
 import scipy.fft
 from scipy import special
 
+from pipeline import robust
+from pipeline.allan import SparseCorrection
+
 Z95 = float(special.ndtri(0.975))  # scipy.stats.norm.ppf, without importing scipy.stats
 CHI2_95 = float(2 * special.gammaincinv(0.5, 0.95))  # scipy.stats.chi2.ppf(0.95, 1)
 LAGS_S = (0.0, 60.0, 300.0)  # auxiliary channel leading the rate (s)
 LOWPASS_BLOCKS = 31  # moving average of ADIS TEMP/SUPPLY (coarsely quantised) in blocks
 N_WARMUP_TAU = 24  # warm-up time constants tried
 MAX_GLS_POINTS = 1024  # coarse blocks of the exact GLS
-SELECT_BINS = 1 << 16  # histogram bins of the exact median selection
 
 
 def block_means(x: np.ndarray, b: int) -> np.ndarray:
@@ -208,7 +210,7 @@ class Candidate:
     intervals: dict[str, list[float]]
     evidence: dict = field(default_factory=dict)
     correction: np.ndarray | None = None  # decimated series to subtract (n_d,)
-    full_correction: np.ndarray | None = None  # full-rate series to subtract (spikes)
+    spikes: SparseCorrection | None = None  # full-rate samples to subtract (spikes)
     column: np.ndarray | None = None  # AVAR column (unit amplitude) over the curve's τ
     n_params: int = 1
     regressors: np.ndarray | None = None
@@ -413,64 +415,6 @@ def warmup_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
 
 
 @numba.njit(cache=True, nogil=True)
-def _select(x: np.ndarray, k: int, lo: float, hi: float) -> tuple[float, float]:
-    """Order statistics k and k + 1 (0-based, k + 1 < n) of finite ``x`` (min ``lo``, max ``hi``)
-    by histogram selection, O(n).
-
-    Each pass bins the values in [lo, hi] into :data:`SELECT_BINS` bins, with each bin's
-    smallest and largest member (the bin index is monotone in x, so a bin's members are exactly
-    the values between those two), and keeps the bin holding rank k; rank k + 1 is in that bin
-    or is the smallest member of the next non-empty one.  A bin of equal values (quantised data)
-    ends the search; a bin of few values is sorted.
-    """
-    below, above = 0, np.inf  # values below lo; the least value above hi
-    while True:
-        scale = SELECT_BINS / (hi - lo) if hi > lo else 0.0
-        if not np.isfinite(scale):  # a range of subnormal width: one bin
-            scale = 0.0
-        hist = np.zeros(SELECT_BINS, np.int64)
-        bin_lo = np.full(SELECT_BINS, np.inf)
-        bin_hi = np.full(SELECT_BINS, -np.inf)
-        for v in x:
-            if lo <= v <= hi:
-                c = min(int((v - lo) * scale), SELECT_BINS - 1)
-                hist[c] += 1
-                bin_lo[c] = min(bin_lo[c], v)
-                bin_hi[c] = max(bin_hi[c], v)
-        b = 0
-        while below + hist[b] <= k:
-            below += hist[b]
-            b += 1
-        nxt = b + 1
-        while nxt < SELECT_BINS and hist[nxt] == 0:
-            nxt += 1
-        if nxt < SELECT_BINS:
-            above = bin_lo[nxt]
-        lo, hi = bin_lo[b], bin_hi[b]
-        i = k - below
-        if lo == hi:
-            return lo, lo if i + 1 < hist[b] else above
-        if hist[b] <= 4096 or scale == 0.0:
-            rest = np.empty(hist[b] + 1)
-            j = 0
-            for v in x:  # branch-free gather of the values in [lo, hi]
-                rest[j] = v
-                j += (v >= lo) & (v <= hi)
-            rest = np.sort(rest[:j])
-            return rest[i], rest[i + 1] if i + 1 < j else above
-
-
-def median(x: np.ndarray) -> float:
-    """np.median of a 1-D array in O(n) (histogram selection instead of a full partition)."""
-    n = len(x)
-    lo, hi = (np.min(x), np.max(x)) if n else (np.nan, np.nan)
-    if n < 2 or not np.isfinite(lo + hi):  # NaN or inf: numpy's rules
-        return float(np.median(x))
-    first, second = _select(np.ascontiguousarray(x), (n - 1) // 2, lo, hi)
-    return float(first if n % 2 else (first + second) / 2)
-
-
-@numba.njit(cache=True, nogil=True)
 def _beyond(y: np.ndarray, med: float, scale: float, thr: float) -> np.ndarray:
     """Indices i with |y_i − med| / scale > thr (one pass, no full-length temporaries)."""
     out = np.empty(0, np.int64)
@@ -489,38 +433,42 @@ def _beyond(y: np.ndarray, med: float, scale: float, thr: float) -> np.ndarray:
 def spike_candidate(y: np.ndarray, tau0: float) -> Candidate | None:
     """Samples beyond a robust z threshold with a family-wise false-alarm rate of 1e-3 (Gaussian).
 
-    Scale from the median absolute deviation of first differences (insensitive to slow drift).
+    Scale from the median absolute deviation of first differences (insensitive to slow drift;
+    :mod:`pipeline.robust`, no copy of the series).  The correction replaces each spike by the
+    series' median.
     """
     y = np.ascontiguousarray(y)
-    med = median(y)
-    d = np.diff(y)
-    d -= median(d)
-    scale = 1.4826 * median(np.abs(d, out=d)) / np.sqrt(2)
+    med = robust.median(y)
+    scale = robust.MAD_TO_SIGMA * robust.mad(y, differences=True) / np.sqrt(2)
     if scale == 0:
         return None
     thr = float(-special.ndtri(1e-3 / (2 * len(y))))  # norm.isf
     idx = _beyond(y, med, scale, thr)
     if idx.size == 0:
         return None
-    full = np.zeros_like(y)
-    full[idx] = y[idx] - med
+    value = y[idx] - med
     return Candidate(
         "spike",
-        {"count": float(idx.size), "size": float(np.median(np.abs(full[idx]))), "sigma": scale},
+        {"count": float(idx.size), "size": float(np.median(np.abs(value))), "sigma": scale},
         {},
         {"threshold_z": thr, "first_times_s": (idx[:10] * tau0).tolist()},
-        full_correction=full,
+        spikes=SparseCorrection(idx, value),
         n_params=int(idx.size),
         p_value=1e-3,
     )
 
 
 @numba.njit(cache=True, nogil=True)
-def _hann_windowed(y: np.ndarray, mean: float) -> tuple[np.ndarray, float, float]:
-    """(y − mean)·w with w the symmetric Hann window of np.hanning, Σw and Σw², in one pass
-    (w_i = 0.5 + 0.5 cos(π (2i + 1 − n) / (n − 1)) = w_{n−1−i}, so one cosine per pair)."""
+def _hann_windowed(
+    y: np.ndarray, mean: float, fix_index: np.ndarray, fix_value: np.ndarray
+) -> tuple[np.ndarray, float, float]:  # pragma: no cover (JIT)
+    """(y' − mean)·w in float32, with y' = y minus ``fix_value`` at ``fix_index`` and w the
+    symmetric Hann window of np.hanning, Σw and Σw², in one pass (w_i = 0.5 + 0.5 cos(π (2i +
+    1 − n) / (n − 1)) = w_{n−1−i}, so one cosine per pair).  float32 halves the memory of the
+    periodogram of a long series; its rounding (~1e-7 of the amplitude) lies far below the noise
+    floor of an IMU record."""
     n = len(y)
-    out = np.empty(n)
+    out = np.empty(n, np.float32)
     win_sum, win_sq_sum = 0.0, 0.0
     for i in range((n + 1) // 2):
         w = 0.5 + 0.5 * np.cos(np.pi * (1 - n + 2 * i) / (n - 1)) if n > 1 else 1.0
@@ -529,30 +477,50 @@ def _hann_windowed(y: np.ndarray, mean: float) -> tuple[np.ndarray, float, float
         out[n - 1 - i] = (y[n - 1 - i] - mean) * w
         win_sum += pair * w
         win_sq_sum += pair * w * w
+    for k in range(fix_index.size):
+        i = fix_index[k]
+        w = 0.5 + 0.5 * np.cos(np.pi * (1 - n + 2 * i) / (n - 1)) if n > 1 else 1.0
+        out[i] -= fix_value[k] * w
     return out, win_sum, win_sq_sum
 
 
-def psd_line(y: np.ndarray, dt: float, f_lo: float, f_hi: float) -> dict[str, float]:
-    """Strongest line of the Hann-windowed periodogram in [f_lo, f_hi] (parabolic peak).
+def psd_line(
+    y: np.ndarray,
+    dt: float,
+    f_lo: float,
+    f_hi: float,
+    correction: SparseCorrection | None = None,
+) -> dict[str, float]:
+    """Strongest line of the Hann-windowed periodogram in [f_lo, f_hi] (parabolic peak) of
+    ``y`` minus ``correction``.
 
     Frequency 95 % interval from the Cramér–Rao bound for a real sinusoid in locally white
     noise, var(ω) = 24 σ² / (A² N (N² − 1)) (Rife & Boorstyn 1974), σ² from the band's median
     level; amplitude from the windowed peak (Hann coherent gain 1/2).
     """
     n = len(y)
-    windowed, win_sum, win_sq_sum = _hann_windowed(y, y.mean())
-    spec = np.abs(scipy.fft.rfft(windowed, overwrite_x=True)) ** 2
-    f = np.fft.rfftfreq(n, dt)
-    band = np.flatnonzero((f >= f_lo) & (f <= f_hi) & (f > 0))
+    fix = correction or SparseCorrection(np.empty(0, np.int64), np.empty(0))
+    mean = (y.sum() - fix.value.sum()) / n
+    windowed, win_sum, win_sq_sum = _hann_windowed(y, mean, fix.index, fix.value)
+    coef = scipy.fft.rfft(windowed, overwrite_x=True)
+    del windowed
+    step = 1.0 / (n * dt)  # bin spacing of np.fft.rfftfreq(n, dt), whose bin k is k * step
+    k = np.arange(max(int(f_lo / step) - 1, 1), min(int(f_hi / step) + 2, n // 2) + 1)
+    band = k[(k * step >= f_lo) & (k * step <= f_hi)]
     if band.size < 3:
         return {}
-    i = int(band[np.argmax(spec[band])])
-    i = min(max(i, 1), len(spec) - 2)
-    a, b, c = np.log(spec[i - 1 : i + 2] + 1e-300)
+    # the band and one bin either side, as float64 power: the whole spectrum stays float32
+    first = max(int(band[0]) - 1, 0)
+    spec = np.abs(coef[first : int(band[-1]) + 2]).astype(np.float64) ** 2
+    del coef
+    band_power = spec[band - first]
+    i = int(band[np.argmax(band_power)])
+    i = min(max(i, 1), n // 2 - 1)
+    a, b, c = np.log(spec[i - 1 - first : i + 2 - first] + 1e-300)
     delta = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) < 0 else 0.0
     freq = (i + delta) / (n * dt)
-    amp = 2 * np.sqrt(spec[i]) / win_sum
-    noise_psd = np.median(spec[band]) / win_sq_sum  # per-sample variance equivalent
+    amp = 2 * np.sqrt(spec[i - first]) / win_sum
+    noise_psd = np.median(band_power) / win_sq_sum  # per-sample variance equivalent
     sigma_f = np.sqrt(24 * noise_psd / (amp**2 * n * (n**2 - 1))) / (2 * np.pi * dt)
     sigma_f = np.hypot(sigma_f, 0.02 / (n * dt))  # + bias of the log-parabolic Hann interpolation
     return {
@@ -560,5 +528,5 @@ def psd_line(y: np.ndarray, dt: float, f_lo: float, f_hi: float) -> dict[str, fl
         "frequency_lo": float(freq - Z95 * sigma_f),
         "frequency_hi": float(freq + Z95 * sigma_f),
         "psd_amplitude": float(amp),
-        "line_to_floor": float(spec[i] / np.median(spec[band])),
+        "line_to_floor": float(spec[i - first] / np.median(band_power)),
     }

@@ -37,7 +37,7 @@ import numpy as np
 from scipy import special
 
 from pipeline import effects, ieee952
-from pipeline.allan import AllanCurve, allan_curves, oadev
+from pipeline.allan import AllanCurve, SparseCorrection, allan_curves, oadev
 
 DELTA_BIC = 10.0  # AVAR-term candidates
 ALPHA = 1e-3  # family-wise level of each time-domain candidate (Bonferroni over options)
@@ -47,16 +47,32 @@ N_BOOT = 200
 CHI2_95 = effects.CHI2_95  # rise of the AVAR deviance a time-domain correction may cause
 
 
+def block_size(n: int, tau0: float) -> int:
+    """Samples per block of the loop's decimated series: ~1 s, and at least 512 blocks."""
+    return int(max(1, min(round(1.0 / tau0), n // 512)))
+
+
+def aux_block_means(x: np.ndarray | None, tau0: float) -> np.ndarray | None:
+    """An auxiliary channel (n,) as the loop uses it: means over :func:`block_size` blocks.
+
+    The loop never looks at temperature or supply at full rate, so a caller short of memory
+    keeps only these (24 h / 1 kHz: 86 400 values instead of 86.4 M)."""
+    if x is None:
+        return None
+    return effects.block_means(np.asarray(x, dtype=float), block_size(len(x), tau0))
+
+
 @dataclass(frozen=True)
 class AxisSignals:
-    """The analysed uniform segment of one axis (SI rate units)."""
+    """The analysed uniform segment of one axis (SI rate units), with the auxiliary channels
+    of the same segment as :func:`aux_block_means`."""
 
     name: str
     sensor: Literal["gyro", "accel"]
     y: np.ndarray  # (n,) rad/s or m/s²
     tau0: float  # s
-    temp_c: np.ndarray | None  # (n,) °C
-    supply_v: np.ndarray | None  # (n,) V
+    temp_d: np.ndarray | None  # (n // block_size,) °C
+    supply_d: np.ndarray | None  # (n // block_size,) V
 
 
 @dataclass
@@ -137,7 +153,7 @@ class _State:
 
     avar: np.ndarray
     y_d: np.ndarray
-    y: np.ndarray
+    spikes: SparseCorrection | None  # removed from the full-rate series (AxisSignals.y)
     columns: dict[str, np.ndarray] = field(default_factory=dict)
     n_nonlinear: int = 0
     column_params: dict[str, float] = field(default_factory=dict)  # Tc or f0 of each column
@@ -211,8 +227,7 @@ class _Axis:
         self.edf = ieee952.monotone_edf(curve.edf)
         self.avar = np.asarray(curve.adev, dtype=float) ** 2
         self.tau_min, self.fit_note = ieee952.fit_start(self.tau, self.avar, self.edf)
-        n = len(sig.y)
-        self.block = int(max(1, min(round(1.0 / sig.tau0), n // 512)))
+        self.block = block_size(len(sig.y), sig.tau0)
         self.dt = self.block * sig.tau0
         self.y_d = effects.block_means(sig.y, self.block)
         dec = self.tau >= self.dt
@@ -221,15 +236,12 @@ class _Axis:
         self.dec_index = np.flatnonzero(dec)[valid]
         self.m_d = m_d[valid]
 
-    def aux(self, x: np.ndarray | None) -> np.ndarray | None:
-        return None if x is None else effects.block_means(np.asarray(x, dtype=float), self.block)
-
     def corrected_avar(self, state: _State, cand: effects.Candidate) -> np.ndarray:
         """AVAR after a correction: full-rate recompute for spikes, else the decimated change
         AVAR_d(y_d − g) − AVAR_d(y_d) added on τ ≥ block (slow corrections do not act below)."""
-        if cand.full_correction is not None:
+        if cand.spikes is not None:
             m = np.round(self.tau / self.sig.tau0).astype(int)
-            return oadev(state.y - cand.full_correction, self.sig.tau0, m)[0] ** 2
+            return oadev(self.sig.y, self.sig.tau0, m, cand.spikes)[0] ** 2
         if state.avar_d is None:
             state.avar_d = oadev(state.y_d, self.dt, self.m_d)[0] ** 2
         avar_d = oadev(state.y_d - cand.correction, self.dt, self.m_d)[0] ** 2
@@ -240,16 +252,18 @@ class _Axis:
         return out
 
     def half_curves(self, state: _State) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """(tau, avar, edf) of each half of the (corrected) full-rate series."""
-        h = len(state.y) // 2
+        """(tau, avar, edf) of each half of the (spike-corrected) full-rate series, one half at
+        a time (views of the series: the only new full-rate array is one half's phase)."""
+        y = self.sig.y
+        h = len(y) // 2
         m = np.round(self.tau / self.sig.tau0).astype(int)
         m = m[m <= (h - 1) // 4]
-        halves = np.column_stack([state.y[:h], state.y[h : 2 * h]])
-        curves = allan_curves(halves, self.sig.tau0, m)
-        return [
-            (np.asarray(c.tau_s), np.asarray(c.adev) ** 2, ieee952.monotone_edf(c.edf))
-            for c in curves
-        ]
+        out = []
+        for start in (0, h):
+            spikes = state.spikes.within(start, start + h) if state.spikes else None
+            (c,) = allan_curves(y[start : start + h], self.sig.tau0, m, correction=spikes)
+            out.append((np.asarray(c.tau_s), np.asarray(c.adev) ** 2, ieee952.monotone_edf(c.edf)))
+        return out
 
 
 def _column_fits(tau, avar, edf, tau_min, columns, shape, grid, n_nonlinear, cutoff_hz=None):
@@ -320,7 +334,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
     """Run the closed loop of issue 4 on one axis (see module doc)."""
     ax = _Axis(signals, curve)
     tau, edf = ax.tau, ax.edf
-    state = _State(ax.avar, ax.y_d.copy(), signals.y)
+    state = _State(ax.avar, ax.y_d.copy(), None)
     fit0 = state.fit(ax)
     good0 = goodness(fit0, tau, state.avar, edf)
     terms0 = ieee952.terms_from_fit(fit0, state.avar, edf, signals.sensor, ax.fit_note)
@@ -328,7 +342,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
     rejected: dict[str, dict] = {}
     extra_terms: dict[str, dict] = {}
     fit, good = fit0, good0
-    temp_d, supply_d = ax.aux(signals.temp_c), ax.aux(signals.supply_v)
+    temp_d, supply_d = signals.temp_d, signals.supply_d
     for _ in range(MAX_ROUNDS):
         trials = _evaluate(ax, state, fit, good, temp_d, supply_d)
         trials.sort(key=lambda t: -t["margin"])
@@ -443,10 +457,11 @@ def _evaluate(ax: _Axis, state: _State, fit, good, temp_d, supply_d) -> list[dic
         effects.coupling_candidate("supply", state.y_d, supply_d, dt, "V", whiten),
         effects.step_candidate(state.y_d, dt, whiten),
         effects.warmup_candidate(state.y_d, dt, whiten),
-        effects.spike_candidate(state.y, ax.sig.tau0),
+        # spikes: one candidate, from the raw series' robust statistics (found once, whole)
+        effects.spike_candidate(ax.sig.y, ax.sig.tau0) if state.spikes is None else None,
     ]
     tried = [c for c in time_domain if c is not None]
-    n_tests = sum(c.full_correction is None for c in tried)  # spikes: their own family-wise test
+    n_tests = sum(c.spikes is None for c in tried)  # spikes: their own family-wise test
     for cand in tried:
         new_state = _corrected_state(ax, state, cand)
         fit_new = new_state.fit(ax)
@@ -469,7 +484,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good, temp_d, supply_d) -> list[dic
             CHI2_95 if cand.regressors is not None else 0.0,  # spikes: the error must fall
         )
         cand.evidence["avar_delta_bic"] = dbic
-        if cand.full_correction is None:
+        if cand.spikes is None:
             cand.p_value = min(1.0, cand.p_value * n_tests)
             cand.evidence |= {"p_value_family": cand.p_value, "n_time_domain_tests": n_tests}
         margin = 2 * np.log(ALPHA / cand.p_value)
@@ -493,7 +508,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good, temp_d, supply_d) -> list[dic
         new_state = _State(
             state.avar,
             state.y_d,
-            state.y,
+            state.spikes,
             state.columns | {kind: cand.column},
             state.n_nonlinear + 1,
             state.column_params | {kind: p},
@@ -513,7 +528,7 @@ def _corrected_state(ax: _Axis, state: _State, cand: effects.Candidate) -> _Stat
     return _State(
         ax.corrected_avar(state, cand),
         state.y_d if cand.correction is None else state.y_d - cand.correction,
-        state.y if cand.full_correction is None else state.y - cand.full_correction,
+        state.spikes if cand.spikes is None else cand.spikes,
         state.columns,
         state.n_nonlinear,
         state.column_params,
@@ -577,8 +592,11 @@ def _column_candidate(kind, p, fit_new, state, ax) -> effects.Candidate:
     f0 = p
     if amp > 0:
         use_full = p > 0.2 / ax.dt
-        series, step = (state.y, ax.sig.tau0) if use_full else (state.y_d, ax.dt)
-        line = effects.psd_line(series, step, p / 1.6, p * 1.6)
+        line = (
+            effects.psd_line(ax.sig.y, ax.sig.tau0, p / 1.6, p * 1.6, state.spikes)
+            if use_full
+            else effects.psd_line(state.y_d, ax.dt, p / 1.6, p * 1.6)
+        )
         evidence |= line
         f0 = line.get("frequency_hz", p)
     column = effects.sinusoid_avar(tau, f0)

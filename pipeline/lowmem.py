@@ -36,6 +36,7 @@ from pipeline.analyze import (
 )
 from pipeline.condition import Segment, condition, is_stuck, stuck_warning
 from pipeline.decode import decode, mcap_files
+from pipeline.loop import aux_block_means
 from pipeline.progress import StageProgress
 from pipeline.results import AXES, AnalysisResult, AxisResult
 
@@ -142,12 +143,13 @@ def analyze_low_memory(
         f" GB (budget {options.memory_budget_bytes / 1e9:.2f} GB); decoded in {passes} passes"
     )
     house = decode_pass(2, "temp/supply", HOUSEKEEPING_COLUMNS).frames
-    temp_c = _segment(house, "temp_c", seg)
-    supply_v = _segment(house, "supply_v", seg)
-    del house
-    for name, x in (("temp_c", temp_c), ("supply_v", supply_v)):
+    aux: dict[str, np.ndarray | None] = {}
+    for name in ("temp_c", "supply_v"):  # kept as the loop's block means only
+        x = _segment(house, name, seg)
         if x is not None:
             shown[name] = envelope(x)
+        aux[name] = aux_block_means(x, series.tau0_s)
+    del house, x
     m = tau_factors(n, per_decade=options.taus_per_decade)
     results: dict[str, AxisResult] = {}
     for k, name in enumerate(AXES, start=3):
@@ -159,7 +161,7 @@ def analyze_low_memory(
         with progress.stage(f"analyse {name}", 1, "axis") as advance:
             curve = allan_curves([y], series.tau0_s, m)[0]
             results[name] = axis_result(
-                name, y, curve, series.tau0_s, temp_c, supply_v, options.loop
+                name, y, curve, series.tau0_s, aux["temp_c"], aux["supply_v"], options.loop
             )
             advance(1)
         shown[name] = envelope(y)

@@ -8,7 +8,7 @@ from test_ieee952 import B_TRUE, N_TRUE, synth_rate
 
 from pipeline.allan import allan_curves
 from pipeline.effects import CHI2_95
-from pipeline.loop import AxisSignals, close_loop
+from pipeline.loop import AxisSignals, aux_block_means, close_loop
 
 TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
 
@@ -22,7 +22,7 @@ def temperature(n, rng):
 
 def run(y, temp=None, name="gyro_x"):
     curve = allan_curves(y, TAU0)[0]
-    return close_loop(AxisSignals(name, "gyro", y, TAU0, temp, None), curve)
+    return close_loop(AxisSignals(name, "gyro", y, TAU0, aux_block_means(temp, TAU0), None), curve)
 
 
 def base(seed):

@@ -24,7 +24,7 @@ from pipeline.adis16364 import (
 )
 from pipeline.allan import allan_curves
 from pipeline.effects import CHI2_95, gauss_markov_avar
-from pipeline.loop import AxisSignals, LoopResult, close_loop
+from pipeline.loop import AxisSignals, LoopResult, aux_block_means, close_loop
 from pipeline.scenario import (
     AXES,
     BiasStep,
@@ -92,7 +92,17 @@ def loop_results(
     tau0 = 1 / rate_hz
     curves = allan_curves(y, tau0)
     return {
-        a: close_loop(AxisSignals(a, sensor_of(a), y[:, i], tau0, temp, supply), curves[i])
+        a: close_loop(
+            AxisSignals(
+                a,
+                sensor_of(a),
+                y[:, i],
+                tau0,
+                aux_block_means(temp, tau0),
+                aux_block_means(supply, tau0),
+            ),
+            curves[i],
+        )
         for i, a in enumerate(AXES)
     }
 
