@@ -158,3 +158,45 @@ def test_jittery_stamps_warn() -> None:
 def test_single_frame_is_an_error() -> None:
     with pytest.raises(ImupipeError, match="too few"):
         condition(recording(n=1))
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 7, 64])
+def test_chunked_step_scan_equals_one_pass(monkeypatch, chunk) -> None:
+    """Steps are examined a chunk at a time (no full-length step array): every break, count
+    and warning must equal the one-pass result, also for bad stamps on chunk boundaries."""
+    import pipeline.condition as cond
+
+    def anomalies(a):
+        a[7] = a[6]  # duplicate at a boundary of chunks of 7
+        a[14] = a[12]  # backwards, then the long step that makes up for it
+        a[64:] += 37_000_000  # gap on a boundary of chunks of 64
+        a[300:] += 3_600 * 10**9  # an hour
+
+    def counter(a):
+        a += (1 << 32) - 100  # wraps at row 100
+        a[500:] += 3  # three frames missed
+
+    rng = np.random.default_rng(3)
+
+    def jitter(a):
+        a += rng.integers(-200_000, 200_000, len(a))
+
+    def both(a):
+        jitter(a)
+        anomalies(a)
+
+    rec = recording(n=1000, stamp_ns=both, counter=counter)
+    reference = condition(rec)
+    monkeypatch.setattr(cond, "_CHUNK", chunk)
+    chunked = condition(rec)
+    assert chunked.segments == reference.segments
+    assert chunked.counts == reference.counts
+    assert chunked.warnings == reference.warnings
+    assert chunked.tau0_s == reference.tau0_s
+    assert reference.counts["counter_wraps"] == 1
+    assert reference.counts["duplicate_stamps"] == 1
+    assert reference.counts["non_monotonic_stamps"] == 1
+    assert reference.counts["gaps"] == 3 and reference.counts["missed_frames"] == 3
+    assert [(s.start, s.stop) for s in reference.segments] == [
+        (0, 7), (7, 14), (14, 64), (64, 300), (300, 500), (500, 1000)
+    ]  # fmt: skip

@@ -1,0 +1,76 @@
+"""Full-rate pieces of the loop that must not copy the series: spikes as a sparse correction,
+the periodogram line with that correction applied on the fly, the hold-out's half curves."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_ieee952 import B_TRUE, N_TRUE, synth_rate
+
+from pipeline import effects, loop
+from pipeline.allan import allan_curves
+
+TAU0, N = 0.1, 2**16
+
+
+@pytest.fixture(scope="module")
+def spiky():
+    """(series with 6 spikes and a 1.3 Hz line, the same without spikes)."""
+    rng = np.random.default_rng(21)
+    clean = synth_rate(N, TAU0, rng, N_TRUE, B_TRUE)
+    clean += 2e-3 * np.sin(2 * np.pi * 1.3 * np.arange(N) * TAU0)
+    y = clean.copy()
+    y[[5, 900, 20_000, 40_001, 50_000, N - 1]] += [0.4, -0.5, 0.6, 0.45, -0.7, 0.5]
+    return y, clean
+
+
+def test_spike_candidate_finds_the_spikes_as_a_sparse_correction(spiky):
+    y, clean = spiky
+    cand = effects.spike_candidate(y, TAU0)
+    assert cand.spikes.index.tolist() == [5, 900, 20_000, 40_001, 50_000, N - 1]
+    fixed = y.copy()
+    fixed[cand.spikes.index] -= cand.spikes.value
+    assert np.all(np.abs(fixed - clean)[cand.spikes.index] < 0.02)  # replaced by the median
+    assert effects.spike_candidate(clean, TAU0) is None
+
+
+def test_psd_line_with_correction_equals_corrected_copy(spiky):
+    y, _ = spiky
+    fix = effects.spike_candidate(y, TAU0).spikes
+    fixed = y.copy()
+    fixed[fix.index] -= fix.value
+    on_the_fly = effects.psd_line(y, TAU0, 1.0, 1.6, fix)
+    copied = effects.psd_line(fixed, TAU0, 1.0, 1.6)
+    assert on_the_fly.keys() == copied.keys()
+    for key, value in copied.items():
+        assert on_the_fly[key] == pytest.approx(value, rel=1e-6)
+    assert on_the_fly["frequency_lo"] < 1.3 < on_the_fly["frequency_hi"]
+
+
+def test_psd_line_float32_agrees_with_a_float64_periodogram(spiky):
+    """The periodogram is held in float32; a float64 one finds the same peak bin and level."""
+    _, clean = spiky
+    line = effects.psd_line(clean, TAU0, 1.0, 1.6)
+    w = np.hanning(N)
+    spec = np.abs(np.fft.rfft((clean - clean.mean()) * w)) ** 2
+    f = np.fft.rfftfreq(N, TAU0)
+    band = (f >= 1.0) & (f <= 1.6)
+    peak = np.flatnonzero(band)[np.argmax(spec[band])]
+    assert abs(line["frequency_hz"] - f[peak]) < 1 / (N * TAU0)
+    assert line["psd_amplitude"] == pytest.approx(2 * np.sqrt(spec[peak]) / w.sum(), rel=1e-4)
+    assert line["line_to_floor"] == pytest.approx(spec[peak] / np.median(spec[band]), rel=1e-4)
+
+
+def test_half_curves_apply_the_spike_correction(spiky):
+    y, _ = spiky
+    fix = effects.spike_candidate(y, TAU0).spikes
+    fixed = y.copy()
+    fixed[fix.index] -= fix.value
+    (curve,) = allan_curves(y, TAU0)
+    ax = loop._Axis(loop.AxisSignals("gyro_x", "gyro", y, TAU0, None, None), curve)
+    halves = ax.half_curves(loop._State(ax.avar, ax.y_d, fix))
+    h = N // 2
+    for (tau, avar, _edf), part in zip(halves, (fixed[:h], fixed[h:]), strict=True):
+        m = np.round(tau / TAU0).astype(int)
+        (ref,) = allan_curves(part, TAU0, m)
+        np.testing.assert_allclose(avar, ref.adev**2, rtol=1e-9)
