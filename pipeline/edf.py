@@ -109,13 +109,14 @@ def _acf_pass(
 
 
 @numba.njit(cache=True)
-def _acf_noise_id(
+def _acf_power(
     src: np.ndarray, m: int, phase: bool, count: int, dmax: int
-) -> int:  # pragma: no cover (JIT)
-    """Lag-1 ACF noise identification (:func:`acf_noise_id`) of the ``count`` values u_t of
-    :func:`_detrended`, with no array proportional to ``count``: each pass recomputes every
-    detrended, differenced value from ``src`` (the same float64 expressions, in the same order,
-    as detrending and differencing a copy in place, so the result is the same to the bit).
+) -> float:  # pragma: no cover (JIT)
+    """Riley & Greenhall's estimate p = -2 (delta + d) of alpha (:func:`acf_noise_id`, before
+    rounding) for the ``count`` values u_t of :func:`_value`, with no array proportional to
+    ``count``: each pass recomputes every detrended, differenced value from ``src`` (the same
+    float64 expressions, in the same order, as detrending and differencing a copy in place, so
+    p is the same to the bit).
 
     Linear drift removed by the closed-form normal equations with centred abscissa
     t' = t - (L-1)/2: sum t'**2 = L (L**2-1)/12, slope = (sum t u - (L-1)/2 sum u) / sum t'**2.
@@ -138,8 +139,16 @@ def _acf_noise_id(
         r1 = num / den
         delta = r1 / (1.0 + r1)
         if delta < 0.25 or d >= dmax:
-            return int(np.rint(-2.0 * (delta + d)))
+            return -2.0 * (delta + d)
         d += 1
+
+
+@numba.njit(cache=True)
+def _acf_noise_id(
+    src: np.ndarray, m: int, phase: bool, count: int, dmax: int
+) -> int:  # pragma: no cover
+    """:func:`_acf_power` rounded to the nearest integer: the noise type alpha."""
+    return int(np.rint(_acf_power(src, m, phase, count, dmax)))
 
 
 @numba.njit(cache=True)
