@@ -40,60 +40,115 @@ _TABLE3_D2 = (15.23, 12.0)
 
 
 @numba.njit(cache=True)
-def _trend_sums(z: np.ndarray) -> tuple[float, float]:  # pragma: no cover (JIT)
-    """sum z and sum i z, accumulated in index order (the normal equations of the line fit)."""
-    total = 0.0
-    weighted = 0.0
-    for i in range(z.size):
-        total += z[i]
-        weighted += i * z[i]
-    return total, weighted
+def _value(src: np.ndarray, m: int, phase: bool, t: int) -> float:  # pragma: no cover (JIT)
+    """u_t, the t-th value of the series identified: u_t = x[(t+1) m] - x[t m] (m times the
+    t-th non-overlapping m-averaged frequency, NIST SP 1065 eq. (2); the factor does not change
+    the lag-1 ACF) of phase x = ``src`` if ``phase``, else the sample src[t]."""
+    return src[(t + 1) * m] - src[t * m] if phase else src[t]
 
 
 @numba.njit(cache=True)
-def _lag1_acf_about(z: np.ndarray, mean: float) -> float:  # pragma: no cover (JIT)
-    """Lag-1 autocorrelation r1 = sum (z_t - mean)(z_t+1 - mean) / sum (z_t - mean)**2 about a
-    given mean (Riley & Greenhall 2004, eq. (2), with the mean z̄ computed by the caller)."""
+def _detrended(
+    src: np.ndarray, m: int, phase: bool, line: tuple[float, float], t: int
+) -> float:  # pragma: no cover (JIT)
+    """z_0(t) = u_t - (intercept + slope t) (:func:`_value`), ``line`` = (intercept, slope)."""
+    return _value(src, m, phase, t) - (line[0] + line[1] * t)
+
+
+@numba.njit(cache=True)
+def _push(w: np.ndarray, z0: float, k: int) -> None:  # pragma: no cover (JIT)
+    """Advance the forward-difference window ``w`` by the k-th detrended value z0 (k = 0, 1, ...).
+
+    Afterwards w[j] = z_j(k - j) for j <= min(k, w.size - 1), where z_j+1(t) = z_j(t+1) - z_j(t)
+    is the j-th difference, formed by the same subtractions as differencing an array in place.
+    """
+    top = min(k, w.size - 1)
+    for j in range(top):
+        new = z0 - w[j]
+        w[j] = z0
+        z0 = new
+    w[top] = z0
+
+
+@numba.njit(cache=True)
+def _acf_pass(
+    src: np.ndarray,
+    m: int,
+    phase: bool,
+    count: int,
+    line: tuple[float, float],
+    d: int,
+    mean: float,
+    w: np.ndarray,
+) -> tuple[float, float, float]:  # pragma: no cover (JIT)
+    """One streaming pass over z_d, the d-th difference of the detrended series z_0(t),
+    t < ``count`` (:func:`_detrended`), every value recomputed from ``src``.
+
+    Returns num = sum (z_t - mean)(z_t+1 - mean) and den = (z_last - mean)**2 +
+    sum_{t < last} (z_t - mean)**2 of Riley & Greenhall 2004, eq. (2) (r1 = num / den), and the
+    index-order sum of z_d+1 for the next pass's mean.  ``w``: scratch of >= d + 2 values.
+    """
+    window = w[: d + 2]
+    last = count - 1 - d  # last index of z_d: its d + 1 inputs start there
+    for k in range(d + 1):
+        _push(window, _detrended(src, m, phase, line, last + k), k)
+    den = (window[d] - mean) ** 2
+    for k in range(d + 1):
+        _push(window, _detrended(src, m, phase, line, k), k)
+    a = window[d] - mean  # z_d(0)
     num = 0.0
-    den = (z[-1] - mean) ** 2
-    for i in range(z.size - 1):
-        a = z[i] - mean
-        num += a * (z[i + 1] - mean)
+    acc = 0.0
+    for k in range(d + 1, count):  # z_d(t + 1) and z_d+1(t) complete, t = k - d - 1
+        _push(window, _detrended(src, m, phase, line, k), k)
+        b = window[d] - mean
+        num += a * b
         den += a * a
-    return num / den
+        acc += window[d + 1]
+        a = b
+    return num, den, acc
 
 
 @numba.njit(cache=True)
-def _acf_noise_id_consuming(
-    z: np.ndarray, total: float, weighted: float, dmax: int
-) -> int:  # pragma: no cover (JIT)
-    """:func:`acf_noise_id` of ``z`` given its :func:`_trend_sums`; ``z`` is detrended and
-    differenced in place (overwritten), so a full-length series costs no memory beyond itself.
+def _acf_power(
+    src: np.ndarray, m: int, phase: bool, count: int, dmax: int
+) -> float:  # pragma: no cover (JIT)
+    """Riley & Greenhall's estimate p = -2 (delta + d) of alpha (:func:`acf_noise_id`, before
+    rounding) for the ``count`` values u_t of :func:`_value`, with no array proportional to
+    ``count``: each pass recomputes every detrended, differenced value from ``src`` (the same
+    float64 expressions, in the same order, as detrending and differencing a copy in place, so
+    p is the same to the bit).
 
     Linear drift removed by the closed-form normal equations with centred abscissa
-    t = i - (L-1)/2: sum t**2 = L (L**2-1)/12, slope = (sum i z - (L-1)/2 sum z) / sum t**2.
-    Each pass that rewrites z also sums it, in index order, for the mean of the lag-1 ACF (the
-    same additions as ``z.mean()``, so the result is unchanged).
+    t' = t - (L-1)/2: sum t'**2 = L (L**2-1)/12, slope = (sum t u - (L-1)/2 sum u) / sum t'**2.
     """
-    size = z.size
-    slope = (weighted - 0.5 * (size - 1) * total) / (size * (size**2 - 1.0) / 12.0)
-    intercept = total / size - slope * 0.5 * (size - 1)
+    total = 0.0
+    weighted = 0.0
+    for t in range(count):
+        u = _value(src, m, phase, t)
+        total += u
+        weighted += t * u
+    slope = (weighted - 0.5 * (count - 1) * total) / (count * (count**2 - 1.0) / 12.0)
+    line = (total / count - slope * 0.5 * (count - 1), slope)
     acc = 0.0
-    for i in range(size):
-        z[i] = z[i] - (intercept + slope * i)
-        acc += z[i]
+    for t in range(count):
+        acc += _detrended(src, m, phase, line, t)
+    w = np.empty(dmax + 2)
     d = 0
     while True:
-        r1 = _lag1_acf_about(z, acc / z.size)
+        num, den, acc = _acf_pass(src, m, phase, count, line, d, acc / (count - d), w)
+        r1 = num / den
         delta = r1 / (1.0 + r1)
         if delta < 0.25 or d >= dmax:
-            return int(np.rint(-2.0 * (delta + d)))
-        acc = 0.0
-        for i in range(z.size - 1):  # first difference, forward so z[i + 1] is still unread
-            z[i] = z[i + 1] - z[i]
-            acc += z[i]
-        z = z[:-1]
+            return -2.0 * (delta + d)
         d += 1
+
+
+@numba.njit(cache=True)
+def _acf_noise_id(
+    src: np.ndarray, m: int, phase: bool, count: int, dmax: int
+) -> int:  # pragma: no cover
+    """:func:`_acf_power` rounded to the nearest integer: the noise type alpha."""
+    return int(np.rint(_acf_power(src, m, phase, count, dmax)))
 
 
 @numba.njit(cache=True)
@@ -104,8 +159,7 @@ def acf_noise_id(ybar: np.ndarray, dmax: int = 2) -> int:  # pragma: no cover (J
     series d times until delta = r1 / (1 + r1) < 0.25 (or d = dmax, 2 for the Allan variance);
     then p = -2 (delta + d) estimates alpha and is rounded to the nearest integer.
     """
-    total, weighted = _trend_sums(ybar)
-    return _acf_noise_id_consuming(ybar.copy(), total, weighted, dmax)
+    return _acf_noise_id(ybar, 1, False, ybar.size, dmax)
 
 
 def b1_theory(n: int, mu: int) -> float:
@@ -171,27 +225,12 @@ def b1_noise_id(x: np.ndarray, m: int) -> int:
     return 2 if _mvar_over_avar(x, m) < bound else 1
 
 
-@numba.njit(cache=True)
-def _averaged_noise_id(x: np.ndarray, m: int) -> int:  # pragma: no cover (JIT)
-    """:func:`acf_noise_id` of the non-overlapping m-sample sums of frequency from phase,
-    x[(j+1) m] - x[j m], formed and summed for the line fit in one pass."""
-    count = (x.size - 1) // m
-    z = np.empty(count)
-    total = 0.0
-    weighted = 0.0
-    for j in range(count):
-        z[j] = x[(j + 1) * m] - x[j * m]
-        total += z[j]
-        weighted += j * z[j]
-    return _acf_noise_id_consuming(z, total, weighted, 2)
-
-
 @numba.njit(parallel=True, cache=True)
 def _acf_ids(x: np.ndarray, m: np.ndarray) -> np.ndarray:  # pragma: no cover (JIT)
     """:func:`acf_noise_id` of the m-averaged frequencies for each factor in ``m``, in parallel."""
     out = np.empty(m.size, dtype=np.int64)
     for i in numba.prange(m.size):
-        out[i] = _averaged_noise_id(x, m[i])
+        out[i] = _acf_noise_id(x, m[i], True, (x.size - 1) // m[i], 2)
     return out
 
 
