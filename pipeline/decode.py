@@ -223,8 +223,8 @@ def _adis_frame(cols: dict[str, np.ndarray], device: adis.DeviceConfig) -> pl.Da
     )
 
 
-_CHUNK = 1 << 22
-"""Rows per step of the time-base and temperature arithmetic: temporaries of 32 MB, not of the
+_CHUNK = 1 << 20
+"""Rows per step of the time-base and temperature arithmetic: temporaries of 8 MB, not of the
 whole column (a 24 h / 1 kHz column is 691 MB)."""
 
 
@@ -250,10 +250,12 @@ def _imu_frame(
 
     Columns an Imu message does not carry are built as polars constants (an all-null Float64
     ``supply_v`` is a validity bitmap of n/8 bytes, not an n × 8-byte NaN array); ``temp_c`` is
-    interpolated over the stamps into their own buffer when ``stamp_ns`` is not asked for,
-    which then leaves ``cols``."""
+    interpolated over the stamps into their own buffer when ``stamp_ns`` is not asked for.
+    Stamps not asked for leave ``cols`` (the caller's dict) as soon as they are used."""
     n = len(next(iter(cols.values()))) if cols else 0
     keep_stamps = columns is None or "stamp_ns" in columns
+    if columns is not None and not columns & {"stamp_ns", "temp_c"}:
+        cols.pop("stamp_ns", None)  # only needed for t_s, already made: freed before the frame
 
     def temp_c() -> pl.Series:
         if temp is None or not len(temp["stamp_ns"]):
