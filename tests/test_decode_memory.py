@@ -2,7 +2,8 @@
 
 A 24 h / 1 kHz recording has 86.4 M frames: one float64 column is 691 MB, and the 2 GB budget
 of issue 5 leaves room for about two.  The peak of a decoding pass is measured in a fresh
-interpreter (``ru_maxrss``, the kernel's high-water mark, minus the RSS before the call) on a
+interpreter (the kernel's high-water mark VmHWM, reset just before the call, minus the RSS
+then; not ``ru_maxrss``, which starts at the RSS of the forking pytest worker) on a
 ROS Imu bag cut into chunks of 2000 messages, as in rosbag2's 768 KiB chunks: each run's
 arrays are then 16 kB, small enough to live on the C heap.  The subsets also decode exactly
 what the whole decode gives for those columns.
@@ -60,19 +61,24 @@ OVERHEAD = 16e6
 """Bytes allowed beyond the columns: the scanner's chunks in flight (~11 MB measured with
 the bag's chunks) and the chunked arithmetic's temporaries (set to 0.5 MB below)."""
 MEASURE = """
-import resource, sys
+import sys
 from pathlib import Path
 import polars as pl
 import pipeline.decode as dec
 from pipeline.lowmem import _release_freed_memory
 
+def status(key):
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) * 1024 for line in f if line.startswith(key))
+
 dec._CHUNK = 1 << 16  # temporaries of 0.5 MB: the fixed costs stay small next to 24 MB columns
 pl.repeat(None, 1, dtype=pl.UInt32, eager=True)  # polars' first call commits ~9 MB (once)
 _release_freed_memory()  # as before each pass of pipeline.lowmem
-with open("/proc/self/statm") as f:
-    before = int(f.read().split()[1]) * resource.getpagesize()
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # VmHWM := VmRSS (proc(5), Linux >= 4.0)
+before = status("VmRSS:")
 rec = dec.decode(Path(sys.argv[1]), columns=frozenset(sys.argv[2].split(",")))
-print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 - before, rec.frames.height)
+print(status("VmHWM:") - before, rec.frames.height)
 """
 
 
