@@ -1,0 +1,166 @@
+"""Memory of :func:`pipeline.decode.decode` with a column subset (the low-memory path's passes).
+
+A 24 h / 1 kHz recording has 86.4 M frames: one float64 column is 691 MB, and the 2 GB budget
+of issue 5 leaves room for about two.  The peak of a decoding pass is measured in a fresh
+interpreter (the kernel's high-water mark VmHWM, reset just before the call, minus the RSS
+then; not ``ru_maxrss``, which starts at the RSS of the forking pytest worker) on a
+ROS Imu bag cut into chunks of 2000 messages, as in rosbag2's 768 KiB chunks: each run's
+arrays are then 16 kB, small enough to live on the C heap.  The subsets also decode exactly
+what the whole decode gives for those columns.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import pytest
+
+from pipeline import decode as dec
+from pipeline.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, decode
+from pipeline.mcap_bulk import BulkWriter
+from pipeline.ros_cdr import imu_payloads, temperature_payloads
+
+T0_NS = 1_700_000_000_000_000_000
+CHUNK = 2_000
+
+
+def write_bag(path: Path, n: int, stamps_set: bool = True, nan_at: int | None = None) -> Path:
+    """An Imu bag of ``n`` messages at 1 kHz in chunks of :data:`CHUNK` messages, and one
+    Temperature message per chunk.  The samples repeat from chunk to chunk (they compress well:
+    the bag stays small; their values do not matter here)."""
+    rng = np.random.default_rng(2)
+    gyro = rng.integers(-2, 3, (CHUNK, 3)) * 1e-3
+    accel = rng.integers(-2, 3, (CHUNK, 3)) * 1e-2 + [0.0, 0.0, 9.81]
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        tmp = w.register_channel(
+            "/imu/temperature", "cdr", w.register_schema(TEMPERATURE_SCHEMA, "ros2msg", b"")
+        )
+        for start in range(0, n, CHUNK):
+            log = T0_NS + np.arange(start, min(start + CHUNK, n), dtype=np.int64) * 1_000_000
+            g, a = gyro[: len(log)].copy(), accel[: len(log)]
+            if nan_at is not None and start <= nan_at < start + len(log):
+                g[nan_at - start, 1] = np.nan
+            stamps = log if stamps_set else np.zeros_like(log)
+            w.write_chunk(imu, log, imu_payloads(stamps, g, a))
+            temp = np.array([20.0 + start / n if start else np.nan])  # first one: NaN → null
+            w.write_chunk(tmp, log[:1], temperature_payloads(log[:1], temp))
+        w.finish()
+    return path
+
+
+N_BIG = 3_000_000
+"""Messages of the measured bag: a float64 column of 24 MB."""
+OVERHEAD = 16e6
+"""Bytes allowed beyond the columns: the scanner's chunks in flight (~11 MB measured with
+the bag's chunks) and the chunked arithmetic's temporaries (set to 0.5 MB below)."""
+MEASURE = """
+import sys
+from pathlib import Path
+import polars as pl
+import pipeline.decode as dec
+from pipeline.lowmem import _release_freed_memory
+
+def status(key):
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) * 1024 for line in f if line.startswith(key))
+
+dec._CHUNK = 1 << 16  # temporaries of 0.5 MB: the fixed costs stay small next to 24 MB columns
+pl.repeat(None, 1, dtype=pl.UInt32, eager=True)  # polars' first call commits ~9 MB (once)
+_release_freed_memory()  # as before each pass of pipeline.lowmem
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # VmHWM := VmRSS (proc(5), Linux >= 4.0)
+before = status("VmRSS:")
+rec = dec.decode(Path(sys.argv[1]), columns=frozenset(sys.argv[2].split(",")))
+print(status("VmHWM:") - before, rec.frames.height)
+"""
+
+
+@pytest.fixture(scope="module")
+def big_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_bag(tmp_path_factory.mktemp("mem") / "big.mcap", N_BIG)
+
+
+@pytest.mark.parametrize(
+    ("columns", "columns_alive"),
+    [
+        ("gyro_x", 1),  # the axis, collected in blocks and returned without a joining copy
+        ("temp_c,supply_v", 1),  # temp_c over the stamps' buffer; supply_v a null constant
+        # stamps and log time are both needed to choose the time base; t_s goes over one
+        ("t_s,counter,flag_nd,flag_ea,saturated,nonfinite", 2),
+    ],
+)
+@pytest.mark.skipif(sys.platform != "linux", reason="reads /proc/self/statm")
+def test_decode_pass_peak(big_bag: Path, columns: str, columns_alive: int) -> None:
+    env = {**os.environ, "PYTHONPATH": str(Path(dec.__file__).parents[1])}
+    out = subprocess.run(
+        [sys.executable, "-c", MEASURE, str(big_bag), columns],
+        capture_output=True,
+        text=True,
+        check=True,
+        env=env,
+    )
+    extra, rows = map(int, out.stdout.split())
+    assert rows == N_BIG
+    column = 8 * N_BIG
+    assert extra <= 1.15 * columns_alive * column + OVERHEAD, (
+        f"peak {extra / 1e6:.0f} MB for float64 columns of {column / 1e6:.0f} MB"
+    )
+
+
+SUBSETS = [
+    frozenset({"t_s", "counter", "flag_nd", "flag_ea", "saturated", "nonfinite"}),
+    frozenset({"temp_c", "supply_v"}),
+    frozenset({"t_s", "temp_c"}),
+    frozenset({"stamp_ns", "temp_c", "t_s", "diag_stat"}),
+    frozenset({"gyro_y"}),
+]
+
+
+@pytest.mark.parametrize("stamps_set", [True, False])
+def test_subsets_equal_the_whole_decode(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stamps_set: bool
+) -> None:
+    """Blocks joined, t_s over the log time, temp_c over the stamps: the same values (bit for
+    bit), dtypes and nulls as the whole decode, on either time base."""
+    monkeypatch.setattr(dec, "_BLOCK_BYTES", 40_000)  # several blocks a column, split runs
+    monkeypatch.setattr(dec, "_CHUNK", 3_000)  # several steps of the chunked arithmetic
+    path = write_bag(tmp_path / "small.mcap", 21_500, stamps_set, nan_at=7_777)
+    whole = decode(path)
+    assert whole.time_source == ("header.stamp" if stamps_set else "log_time")
+    f = whole.frames
+    assert f.height == 21_500
+    # before the 2nd Temperature message: NaN → null (unset stamps all fall before it)
+    assert f["temp_c"].null_count() == (CHUNK if stamps_set else f.height)
+    assert f["supply_v"].dtype == pl.Float64 and f["supply_v"].null_count() == f.height
+    assert f["flag_nd"].all() and not f["flag_ea"].any() and not f["saturated"].any()
+    assert f["diag_stat"].dtype == pl.UInt16 and f["diag_stat"].max() == 0
+    assert np.isnan(f["gyro_y"][7_777])
+    stamps = f["stamp_ns"].to_numpy() if stamps_set else np.arange(21_500) * 1_000_000
+    expected_t = (stamps - stamps[0]) / 1e9
+    np.testing.assert_array_equal(f["t_s"].to_numpy(), expected_t)
+    for columns in SUBSETS:
+        part = decode(path, columns=columns)
+        assert part.time_source == (whole.time_source if "t_s" in columns else "")
+        assert sorted(part.frames.columns) == sorted(columns)
+        expected = f.with_columns(nonfinite=pl.Series([i == 7_777 for i in range(f.height)]))
+        assert part.frames.equals(expected.select(part.frames.columns)), columns
+
+
+def test_column_blocks_join_like_concatenate(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(dec, "_BLOCK_BYTES", 1_000)
+    rng = np.random.default_rng(0)
+    for shape, dtype in (((), np.int64), ((3,), np.float64), ((), np.bool_)):
+        parts = [rng.normal(size=(k, *shape)).astype(dtype) for k in (7, 300, 0, 1, 126, 2_000)]
+        column = dec._Column()
+        for p in parts:
+            column.add(p)
+        joined = column.join()
+        assert joined.dtype == dtype and not column.blocks
+        np.testing.assert_array_equal(joined, np.concatenate(parts))
