@@ -194,17 +194,36 @@ def _rn_theory(m: int, alpha: int) -> float:
     return mvar / avar
 
 
-def _mvar_over_avar(x: np.ndarray, m: int) -> float:
+@numba.njit(cache=True, nogil=True, inline="always")
+def _second_difference(x: np.ndarray, m: int, i: int) -> float:  # pragma: no cover (JIT)
+    return x[i + 2 * m] - 2.0 * x[i + m] + x[i]
+
+
+@numba.njit(cache=True, nogil=True)
+def _mvar_over_avar(x: np.ndarray, m: int) -> float:  # pragma: no cover (JIT)
     """R(n) measured on phase ``x``: modified over overlapping Allan variance at factor m.
 
-    NIST SP 1065 eq. (14) (MVAR: second differences averaged over m adjacent starts) and
+    NIST SP 1065 eq. (14) (MVAR: second differences d_i averaged over m adjacent starts) and
     eq. (11) (overlapping AVAR); the common 1/(2 m**2 tau**2) factors cancel except for 1/m**2.
+    The m-sums of d are differences c_{j+m} − c_j of its running sum c, both ends carried along
+    in one pass: no array of the record's length.
     """
-    d2 = x[2 * m :] - 2.0 * x[m:-m] + x[: -2 * m]
-    c = np.concatenate(([0.0], np.cumsum(d2)))
-    moving = c[m:] - c[:-m]
-    mvar = (moving @ moving) / (moving.size * m**2)
-    return float(mvar / ((d2 @ d2) / d2.size))
+    size = x.size - 2 * m
+    avar = 0.0
+    for i in range(size):
+        d = _second_difference(x, m, i)
+        avar += d * d
+    lo, hi = 0.0, 0.0  # c_j and c_{j+m}
+    for i in range(m):
+        hi += _second_difference(x, m, i)
+    mvar = 0.0
+    for j in range(size - m + 1):
+        moving = hi - lo
+        mvar += moving * moving
+        if j + m < size:
+            hi += _second_difference(x, m, j + m)
+        lo += _second_difference(x, m, j)
+    return (mvar / ((size - m + 1) * m**2)) / (avar / size)
 
 
 def b1_noise_id(x: np.ndarray, m: int) -> int:

@@ -36,6 +36,7 @@ from pipeline.allan import SparseCorrection
 Z95 = float(special.ndtri(0.975))  # scipy.stats.norm.ppf, without importing scipy.stats
 CHI2_95 = float(2 * special.gammaincinv(0.5, 0.95))  # scipy.stats.chi2.ppf(0.95, 1)
 LAGS_S = (0.0, 60.0, 300.0)  # auxiliary channel leading the rate (s)
+PSD_MAX_SAMPLES = 1 << 24  # longest series of the periodogram line search (psd_line)
 LOWPASS_BLOCKS = 31  # moving average of ADIS TEMP/SUPPLY (coarsely quantised) in blocks
 N_WARMUP_TAU = 24  # warm-up time constants tried
 MAX_GLS_POINTS = 1024  # coarse blocks of the exact GLS
@@ -492,14 +493,17 @@ def psd_line(
     correction: SparseCorrection | None = None,
 ) -> dict[str, float]:
     """Strongest line of the Hann-windowed periodogram in [f_lo, f_hi] (parabolic peak) of
-    ``y`` minus ``correction``.
+    ``y`` minus ``correction``, over its first :data:`PSD_MAX_SAMPLES` samples at most
+    (``psd_samples`` in the result): a longer FFT's buffers would outgrow the analysis of a
+    24 h / 1 kHz axis, and 2**24 samples already resolve a line to ~1e-4 Hz at 1 kHz.
 
     Frequency 95 % interval from the Cramér–Rao bound for a real sinusoid in locally white
     noise, var(ω) = 24 σ² / (A² N (N² − 1)) (Rife & Boorstyn 1974), σ² from the band's median
     level; amplitude from the windowed peak (Hann coherent gain 1/2).
     """
-    n = len(y)
-    fix = correction or SparseCorrection(np.empty(0, np.int64), np.empty(0))
+    n = min(len(y), PSD_MAX_SAMPLES)
+    y = y[:n]
+    fix = (correction or SparseCorrection(np.empty(0, np.int64), np.empty(0))).within(0, n)
     mean = (y.sum() - fix.value.sum()) / n
     windowed, win_sum, win_sq_sum = _hann_windowed(y, mean, fix.index, fix.value)
     coef = scipy.fft.rfft(windowed, overwrite_x=True)
@@ -529,4 +533,5 @@ def psd_line(
         "frequency_hi": float(freq + Z95 * sigma_f),
         "psd_amplitude": float(amp),
         "line_to_floor": float(spec[i - first] / np.median(band_power)),
+        "psd_samples": n,
     }

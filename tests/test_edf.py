@@ -129,3 +129,17 @@ def test_chi2_interval_definition_and_coverage():
     s = np.sqrt(rng.chisquare(7.0, 20_000) / 7.0)
     lo, hi = chi2_interval(s, np.full(s.size, 7.0), confidence=0.683)
     assert np.mean((lo <= 1.0) & (1.0 <= hi)) == pytest.approx(0.683, abs=0.01)
+
+
+def test_mvar_over_avar_streams_the_numpy_formula():
+    """R(n) without record-length arrays equals the numpy form of NIST SP 1065 eqs. (11), (14)."""
+    from pipeline.edf import _mvar_over_avar
+
+    rng = np.random.default_rng(8)
+    x = np.cumsum(rng.standard_normal(5_001))
+    for m in (1, 2, 7, 100, 1_000):
+        d2 = x[2 * m :] - 2.0 * x[m:-m] + x[: -2 * m]
+        c = np.concatenate(([0.0], np.cumsum(d2)))
+        moving = c[m:] - c[:-m]
+        expected = (moving @ moving) / (moving.size * m**2) / ((d2 @ d2) / d2.size)
+        assert _mvar_over_avar(x, m) == pytest.approx(expected, rel=1e-12)

@@ -74,3 +74,12 @@ def test_half_curves_apply_the_spike_correction(spiky):
         m = np.round(tau / TAU0).astype(int)
         (ref,) = allan_curves(part, TAU0, m)
         np.testing.assert_allclose(avar, ref.adev**2, rtol=1e-9)
+
+
+def test_psd_line_of_a_long_series_uses_its_first_psd_max_samples(spiky, monkeypatch):
+    y, _ = spiky
+    fix = effects.spike_candidate(y, TAU0).spikes
+    whole = effects.psd_line(y[: N // 2], TAU0, 1.0, 1.6, fix.within(0, N // 2))
+    monkeypatch.setattr(effects, "PSD_MAX_SAMPLES", N // 2)
+    capped = effects.psd_line(y, TAU0, 1.0, 1.6, fix)
+    assert capped == whole and capped["psd_samples"] == N // 2
