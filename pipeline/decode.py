@@ -151,15 +151,42 @@ class _Columns:
         return {k: self.columns.pop(k).join() for k in list(self.columns)}
 
 
-def _decode_adis_run(run: MessageRun, out: _Columns) -> None:
+_RAIL = (1 << 13) - 1
+"""ADIS16364 14-bit full scale: the inertial outputs saturate at -8192..8191 counts."""
+
+
+def _decode_adis_run(run: MessageRun, out: _Columns, columns: frozenset[str] | None) -> None:
+    """Decode an ADIS16364 run into the columns ``columns`` needs (None: all of them).
+
+    The burst words are decoded run by run and kept as integer counts (an axis costs 2 bytes
+    a frame until :func:`_adis_frame` scales it): the (n, 11) words of a whole recording are
+    never held.  Stamps are kept only for ``t_s`` / ``stamp_ns``."""
     block = decode_frames(run.payloads)
-    out.add(
-        stamp_ns=block.stamp_ns,
-        log_time_ns=run.log_time,
-        counter=block.counter,
-        burst=block.burst,
-        diag_stat=block.diag_stat,
-    )
+    counts, new_data, alarm = adis.decode_burst(block.burst)
+
+    def wanted(*names: str) -> bool:
+        return columns is None or not columns.isdisjoint(names)
+
+    if wanted("t_s", "stamp_ns"):
+        out.add(stamp_ns=block.stamp_ns)
+    if wanted("t_s"):
+        out.add(log_time_ns=run.log_time)
+    out.add(**{name: counts[1 + i] for i, name in enumerate(AXES) if wanted(name)})
+    if wanted("temp_c"):  # the three TEMP words (one per gyro)
+        out.add(temp_c=counts[7:10].sum(axis=0, dtype=np.int32))
+    if wanted("supply_v"):
+        out.add(supply_v=counts[0])
+    if wanted("counter"):
+        out.add(counter=block.counter)
+    if wanted("flag_nd"):
+        out.add(flag_nd=new_data)
+    if wanted("flag_ea"):
+        out.add(flag_ea=alarm)
+    if wanted("saturated"):
+        inertial = counts[1:7]
+        out.add(saturated=((inertial >= _RAIL) | (inertial <= -_RAIL - 1)).any(axis=0))
+    if wanted("diag_stat"):
+        out.add(diag_stat=block.diag_stat)
 
 
 def _decode_imu_run(run: MessageRun, out: _Columns, columns: frozenset[str] | None) -> None:
@@ -198,30 +225,29 @@ def _decode_temperature_run(run: MessageRun, out: _Columns) -> None:
     )
 
 
-def _adis_frame(cols: dict[str, np.ndarray], device: adis.DeviceConfig) -> pl.DataFrame:
-    """Raw burst words → SI columns with the device's scale factors (one pass over the words)."""
-    counts, new_data, alarm = adis.decode_burst(cols.pop("burst"))
-    gyro_scale = device.gyro_scale_dps * RAD_PER_DEG  # rad/s per LSB
-    accel_scale = adis.ACCEL_MG_PER_LSB * 1e-3 * STANDARD_GRAVITY  # m/s² per LSB
-    rail = (1 << 13) - 1  # 14-bit full scale: the part saturates at -8192..8191
-    inertial = counts[1:7]
-    saturated = ((inertial >= rail) | (inertial <= -rail - 1)).any(axis=0)
-    data = {name: counts[1 + i] * gyro_scale for i, name in enumerate(AXES[:3])}
-    data.update({name: counts[4 + i] * accel_scale for i, name in enumerate(AXES[3:])})
-    temp = counts[7:10].sum(axis=0) * (adis.TEMP_C_PER_LSB / 3) + adis.TEMP_ZERO_C
-    return pl.DataFrame(
-        {
-            "stamp_ns": cols["stamp_ns"],
-            **data,
-            "temp_c": temp,
-            "supply_v": counts[0] * adis.SUPPLY_V_PER_LSB,
-            "counter": cols["counter"],
-            "flag_nd": new_data,
-            "flag_ea": alarm,
-            "saturated": saturated,
-            "diag_stat": cols["diag_stat"],
-        }
-    )
+def _adis_frame(
+    cols: dict[str, np.ndarray], device: adis.DeviceConfig, columns: frozenset[str] | None
+) -> pl.DataFrame:
+    """Counts → SI columns with the device's scale factors: the decode contract's columns, or
+    only ``columns`` of them (``nonfinite`` is all false: the words are integers).  Each
+    integer column leaves ``cols`` (the caller's dict) as it is scaled, and stamps not asked for
+    as soon as :func:`decode` has made ``t_s``."""
+    n = len(next(iter(cols.values()))) if cols else 0
+    if columns is not None and "stamp_ns" not in columns:
+        cols.pop("stamp_ns", None)
+    scale = dict.fromkeys(AXES[:3], device.gyro_scale_dps * RAD_PER_DEG)  # rad/s per LSB
+    scale |= dict.fromkeys(AXES[3:], adis.ACCEL_MG_PER_LSB * 1e-3 * STANDARD_GRAVITY)  # m/s²
+    makers = {
+        "stamp_ns": lambda: cols.pop("stamp_ns"),
+        **{name: (lambda name=name: cols.pop(name) * scale[name]) for name in AXES},
+        "temp_c": lambda: cols.pop("temp_c") * (adis.TEMP_C_PER_LSB / 3) + adis.TEMP_ZERO_C,
+        "supply_v": lambda: cols.pop("supply_v") * adis.SUPPLY_V_PER_LSB,
+        **{k: (lambda k=k: cols.pop(k)) for k in ("counter", "flag_nd", "flag_ea", "saturated")},
+        "diag_stat": lambda: cols.pop("diag_stat"),
+        "nonfinite": lambda: pl.repeat(False, n, dtype=pl.Boolean, eager=True),
+    }
+    wanted = [k for k in makers if (k != "nonfinite" if columns is None else k in columns)]
+    return pl.DataFrame({k: makers[k]() for k in wanted})
 
 
 _CHUNK = 1 << 20
@@ -396,7 +422,7 @@ def decode(
     warnings: list[str] = []
     done = 0
     layouts = {  # kind: (decoder, alignment of the fields after the header, their size in bytes)
-        "adis16364": (_decode_adis_run, 4, TAIL_SIZE),
+        "adis16364": (lambda run, out: _decode_adis_run(run, out, columns), 4, TAIL_SIZE),
         "imu": (lambda run, out: _decode_imu_run(run, out, columns), 8, _IMU_TAIL),
         "temperature": (_decode_temperature_run, 8, 16),
     }
@@ -469,11 +495,7 @@ def decode(
                 f"{path}: unreadable '{METADATA_NAME}' metadata record ({exc!r}): scale factors "
                 "unknown"
             ) from None
-        frames = _adis_frame(cols, device)
-        if columns is not None:
-            nonfinite = ~np.isfinite(frames.select(AXES).to_numpy()).all(axis=1)
-            frames = frames.with_columns(nonfinite=nonfinite)
-            frames = frames.select(c for c in frames.columns if c in columns)
+        frames = _adis_frame(cols, device, columns)
         source = SCHEMA_NAME
     else:
         temp_topic = _sibling_temperature(
