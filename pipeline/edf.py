@@ -223,7 +223,8 @@ def _mvar_over_avar(x: np.ndarray, m: int) -> float:  # pragma: no cover (JIT)
         if j + m < size:
             hi += _second_difference(x, m, j + m)
         lo += _second_difference(x, m, j)
-    return (mvar / ((size - m + 1) * m**2)) / (avar / size)
+    terms = float(size - m + 1) * float(m) ** 2  # float: (M - m + 1) m² overflows int64
+    return (mvar / terms) / (avar / size)
 
 
 def b1_noise_id(x: np.ndarray, m: int) -> int:

@@ -137,7 +137,10 @@ def test_mvar_over_avar_streams_the_numpy_formula():
 
     rng = np.random.default_rng(8)
     x = np.cumsum(rng.standard_normal(5_001))
-    for m in (1, 2, 7, 100, 1_000):
+    cases = [(x, m) for m in (1, 2, 7, 100, 1_000)]
+    # (M - m + 1) m² above 2**63 (24 h at 1 kHz, m = 3.2 M): the count must not overflow
+    cases.append((np.cumsum(rng.standard_normal(8_400_001)), 2_000_000))
+    for x, m in cases:
         d2 = x[2 * m :] - 2.0 * x[m:-m] + x[: -2 * m]
         c = np.concatenate(([0.0], np.cumsum(d2)))
         moving = c[m:] - c[:-m]
