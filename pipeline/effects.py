@@ -499,7 +499,11 @@ def psd_line(
 
     Frequency 95 % interval from the Cramér–Rao bound for a real sinusoid in locally white
     noise, var(ω) = 24 σ² / (A² N (N² − 1)) (Rife & Boorstyn 1974), σ² from the band's median
-    level; amplitude from the windowed peak (Hann coherent gain 1/2).
+    level; amplitude from the windowed peak (Hann coherent gain 1/2).  ``line_p_value``: chance
+    that noise alone puts a bin this far above the band's level — periodogram bins of noise are
+    ~exponential (level = median / ln 2), so the largest of K bins exceeds v times the level
+    with probability 1 − (1 − e^−v)^K (Fisher 1929's test of the largest periodogram ordinate,
+    with the level estimated robustly; the Hann window's correlated bins make it conservative).
     """
     n = min(len(y), PSD_MAX_SAMPLES)
     y = y[:n]
@@ -527,11 +531,14 @@ def psd_line(
     noise_psd = np.median(band_power) / win_sq_sum  # per-sample variance equivalent
     sigma_f = np.sqrt(24 * noise_psd / (amp**2 * n * (n**2 - 1))) / (2 * np.pi * dt)
     sigma_f = np.hypot(sigma_f, 0.02 / (n * dt))  # + bias of the log-parabolic Hann interpolation
+    ratio = spec[i - first] / np.median(band_power)
+    line_p = -np.expm1(band.size * np.log1p(-np.exp(-np.log(2) * ratio)))
     return {
         "frequency_hz": float(freq),
         "frequency_lo": float(freq - Z95 * sigma_f),
         "frequency_hi": float(freq + Z95 * sigma_f),
         "psd_amplitude": float(amp),
-        "line_to_floor": float(spec[i - first] / np.median(band_power)),
+        "line_to_floor": float(ratio),
+        "line_p_value": float(line_p),
         "psd_samples": n,
     }

@@ -4,7 +4,9 @@ Per axis: fit the composite AVAR model (:mod:`pipeline.ieee952`), compute normal
 and the goodness of fit (error = gamma deviance / dof on the octave-spaced τ of the fitted
 range, p-value calibrated by parametric bootstrap), then try every candidate of
 :mod:`pipeline.effects`.  A candidate is accepted only when (1) it is significant — AVAR terms
-(sinusoid, Gauss–Markov): ΔBIC = ΔD/φ − Δk·ln(n_τ) ≥ 10; time-domain corrections
+(sinusoid, Gauss–Markov): ΔBIC = ΔD/φ − Δk·ln(n_τ) ≥ 10, and a sinusoid's periodogram line
+stands out of its band's noise (:func:`effects.psd_line`, p below :data:`ALPHA`: on a long
+record a sliver of misfit passes ΔBIC, but only a real line passes this); time-domain corrections
 (temperature, supply, bias step, warm-up drift): exact-GLS p-value, whitened by the axis' own
 fitted noise PSD (flicker and rate random walk included) and Bonferroni-adjusted for the
 options searched, below :data:`ALPHA`; spikes: their own family-wise test — (2) it holds out
@@ -563,6 +565,9 @@ def _decide(t: dict) -> dict:
         )
     if hold["holds"] is False:
         reasons.append("does not hold out of sample")
+    line_p = cand.evidence.get("line_p_value")
+    if line_p is not None and line_p >= ALPHA:
+        reasons.append(f"no periodogram line above the band's noise (p {line_p:.3g} >= {ALPHA:g})")
     if not t["flags_ok"]:
         reasons.append("flags do not clear")
     t["accept"] = not reasons

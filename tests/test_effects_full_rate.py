@@ -83,3 +83,17 @@ def test_psd_line_of_a_long_series_uses_its_first_psd_max_samples(spiky, monkeyp
     monkeypatch.setattr(effects, "PSD_MAX_SAMPLES", N // 2)
     capped = effects.psd_line(y, TAU0, 1.0, 1.6, fix)
     assert capped == whole and capped["psd_samples"] == N // 2
+
+
+def test_line_p_value_separates_a_line_from_noise(spiky):
+    """A real line has a tiny p; the largest bin of pure noise is not a line: p is about
+    uniform (conservative with the Hann window), below 0.05 in at most ~5 % of records."""
+    _, clean = spiky
+    assert effects.psd_line(clean, TAU0, 1.0, 1.6)["line_p_value"] < 1e-12
+    rng = np.random.default_rng(7)
+    p = [
+        effects.psd_line(rng.standard_normal(4096), TAU0, 1.0, 1.6)["line_p_value"]
+        for _ in range(200)
+    ]
+    assert np.mean(np.array(p) < 0.05) <= 0.08
+    assert np.mean(np.array(p) < 0.5) >= 0.2  # not degenerate: the p-values spread
