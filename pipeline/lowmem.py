@@ -19,6 +19,8 @@ stated in the report's warnings.
 from __future__ import annotations
 
 import ctypes
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -109,14 +111,9 @@ def _release_freed_memory() -> None:
         pass
 
 
-def _compile_kernels(loop: bool) -> None:
+def compile_kernels(loop: bool = True) -> None:
     """Compile the numba kernels (or load them from numba's disk cache) on a few thousand
-    synthetic samples, before any record-length array exists.
-
-    On the first run after installing, LLVM's working memory while compiling (measured: the
-    24 h / 1 kHz peak rose from 1.76 to 1.92 GB with a cold cache) would otherwise stack on the
-    data of the pass that first calls a kernel; here it is freed (and trimmed) before pass 1.
-    """
+    synthetic samples: every kernel the passes call, with the types they call it with."""
     rng = np.random.default_rng(0)
     white = rng.standard_normal(4096)
     axis_result("gyro_x", white, allan_curves([white], 0.01)[0], 0.01, None, None, loop)
@@ -126,6 +123,18 @@ def _compile_kernels(loop: bool) -> None:
     )
     robust.median_positive(np.cumsum(white), differences=True)
     robust.mad(np.cumsum(white), differences=True)
+
+
+def _load_kernels(loop: bool) -> None:
+    """Have the kernels compiled into numba's disk cache by a child process, then load them.
+
+    Compiling in this process on a first run after installing keeps ~0.2 GB of LLVM's memory
+    resident under the data (24 h / 1 kHz, cold cache: peak 1.97 GB against 1.76 GB warm);
+    a child's memory leaves with it.  Loading from the cache costs this process little.  If the
+    child fails (e.g. a read-only cache), the kernels are compiled here as before."""
+    code = f"from pipeline.lowmem import compile_kernels; compile_kernels({loop})"
+    subprocess.run([sys.executable, "-c", code], capture_output=True, check=False)
+    compile_kernels(loop)
 
 
 def _segment(frames: pl.DataFrame, name: str, seg: Segment) -> np.ndarray | None:
@@ -154,7 +163,7 @@ def analyze_low_memory(
             return decode(path, topic=options.topic, progress=advance, columns=columns)
 
     with progress.stage("compile", 1, "step"):
-        _compile_kernels(options.loop)
+        _load_kernels(options.loop)
     rec = decode_pass(1, "stamps", CONDITION_COLUMNS)
     series = condition(rec, gaps=options.gaps)
     n = series.frames.height
