@@ -373,8 +373,11 @@ class CompositeFit:
         return max(1.0, self.deviance / max(self.dof, 1))
 
     def avar(self) -> np.ndarray:
-        """Model AVAR at every τ of the curve."""
-        return self.design @ self.coef
+        """Model AVAR at every τ of the curve; NaN where it is not positive — below the fitted
+        range, where the signed prefilter term −P/τ² outgrows the others (at 819.2 SPS: the two
+        shortest τ), the model does not apply and has no deviation or residual."""
+        model = self.design @ self.coef
+        return np.where(model > 0, model, np.nan)
 
     def profile_interval(
         self, avar: np.ndarray, edf: np.ndarray, j: int, level: float = 0.95

@@ -97,3 +97,20 @@ def test_envelope_keeps_extremes_and_stamps_order() -> None:
     assert env.max() == 5.0 and env.min() == y.min()
     assert np.all(np.diff(t) > 0)
     assert envelope(y[:15], bins=10) is not None and len(envelope(y[:15], bins=10)) == 15
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_fastest_rate_model_below_fit_range_is_null_not_nan_warning(tmp_path: Path) -> None:
+    """At 819.2 SPS the fitted prefilter term −P/τ² makes the model negative at the two
+    shortest τ (below the fitted range): no sqrt/log of a negative, null in the report."""
+    config = config_for_rate(819.2)
+    block = VirtualADIS16364(config, None, seed=4).frames(120_000)
+    path = tmp_path / "fast.mcap"
+    with open(path, "wb") as f:
+        writer = FrameWriter(f, config)
+        writer.write(block)
+        writer.finish()
+    report, _ = run(path, tmp_path / "out", 2_000_000_000)
+    allan = report["axes"]["gyro_x"]["allan"]
+    assert allan["model_adev_before"][0] is None
+    assert all(v is not None for v in allan["model_adev_before"][3:])
