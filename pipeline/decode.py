@@ -136,15 +136,41 @@ class _Column:
         return out
 
 
-class _Columns:
-    """Accumulates decoded column arrays of one channel, run by run."""
+class _Steps:
+    """The non-increasing steps x[i + 1] <= x[i] of a series seen run by run, and whether any
+    value is non-zero."""
 
     def __init__(self) -> None:
+        self.last: int | None = None
+        self.count = 0
+        self.nonzero = False
+
+    def add(self, x: np.ndarray) -> None:
+        if len(x):
+            first_step_bad = self.last is not None and x[0] <= self.last
+            self.count += int(first_step_bad) + int(np.count_nonzero(np.diff(x) <= 0))
+            self.last = int(x[-1])
+            self.nonzero |= bool(np.any(x))
+
+
+_TIMES = ("stamp_ns", "log_time_ns")
+
+
+class _Columns:
+    """Accumulates decoded column arrays of one channel, run by run; the two candidate time
+    bases are also followed by :class:`_Steps`, and not kept when named in ``skip``."""
+
+    def __init__(self, skip: frozenset[str] = frozenset()) -> None:
         self.columns: dict[str, _Column] = defaultdict(_Column)
+        self.steps = {name: _Steps() for name in _TIMES}
+        self.skip = skip
 
     def add(self, **cols: np.ndarray) -> None:
         for k, v in cols.items():
-            self.columns[k].add(v)
+            if k in self.steps:
+                self.steps[k].add(v)
+            if k not in self.skip:
+                self.columns[k].add(v)
 
     def concat(self) -> dict[str, np.ndarray]:
         """One array per column; each column's blocks are released as it is joined."""
@@ -331,34 +357,34 @@ def _sibling_temperature(imu_topic: str, temp_topics: list[str]) -> str | None:
     return max(temp_topics, key=shared)
 
 
-def _non_increasing(x: np.ndarray) -> int:
-    """Steps x[i + 1] <= x[i], counted chunk by chunk."""
-    return sum(
-        int(np.count_nonzero(np.diff(x[i : i + _CHUNK + 1]) <= 0))
-        for i in range(0, max(len(x) - 1, 0), _CHUNK)
-    )
-
-
-def _choose_time_base(
-    stamp: np.ndarray, log: np.ndarray, warnings: list[str]
-) -> tuple[np.ndarray, str]:
-    """Seconds since the first frame (f64) on header.stamp, or on the MCAP log time when the
-    stamps are unset or less monotonic than the log time; and the name of the base used.
-
-    The seconds are written over ``log`` (the log time is not kept, so ``log`` must not be used
-    afterwards): the time base costs no third full-length array next to the two inputs
-    (24 h at 1 kHz: 691 MB each)."""
-    stamp_bad, log_bad = _non_increasing(stamp), _non_increasing(log)
-    if np.all(stamp == 0) or stamp_bad > max(10 * log_bad, 10):
+def _uses_log_time(steps: dict[str, _Steps], warnings: list[str]) -> bool:
+    """Whether the time base is the MCAP log time: when the header stamps are unset or less
+    monotonic than the log time (else header.stamp)."""
+    stamp_bad, log_bad = steps["stamp_ns"].count, steps["log_time_ns"].count
+    if not steps["stamp_ns"].nonzero or stamp_bad > max(10 * log_bad, 10):
         warnings.append(
             "header.stamp is unset or not monotonic "
             f"({stamp_bad} non-increasing steps); using MCAP log time as the time base"
         )
-        base, name = log, "log_time"
+        return True
+    return False
+
+
+def _seconds(cols: dict[str, np.ndarray], use_log: bool, keep_stamps: bool) -> np.ndarray:
+    """Seconds since the first frame (f64) on the chosen base, written over a buffer that is not
+    needed afterwards: the log time (popped from ``cols``), else the stamps themselves when
+    ``keep_stamps`` is false (the frame builders then drop ``cols["stamp_ns"]`` unread): the
+    time base costs no extra full-length array (24 h at 1 kHz: 691 MB each)."""
+    log = cols.pop("log_time_ns", None)
+    base = log if use_log else cols["stamp_ns"]
+    if log is not None:
+        out = log.view(np.float64)
+    elif not keep_stamps:
+        out = base.view(np.float64)
     else:
-        base, name = stamp, "header.stamp"
+        out = np.empty(len(base))
     first = base[0]
-    return _map_chunks(base, lambda b: (b - first) / 1e9, log.view(np.float64)), name
+    return _map_chunks(base, lambda b: (b - first) / 1e9, out)
 
 
 def mcap_files(path: Path) -> list[Path]:
@@ -398,12 +424,16 @@ def decode(
     topic: str | None = None,
     progress: Callable[[int], None] | None = None,
     columns: frozenset[str] | None = None,
+    keep_one_time_base: bool = False,
 ) -> ImuRecording:
     """Decode the IMU channel of an MCAP file or rosbag2 directory (contract: module docstring).
 
     ``columns`` restricts the frame to those contract columns, plus ``nonfinite`` (bool: any
     axis NaN/inf) if named, so that a recording too large for memory can be decoded in passes
     of a few columns each (:mod:`pipeline.lowmem`); None gives the whole contract.
+    ``keep_one_time_base``: for ``t_s``, keep only the header stamps while reading (both bases'
+    monotonicity is counted on the way) and read the file again for the log time in the rare
+    case the stamps are unset or broken — one int64 column less at the peak.
 
     Raises:
         InputError: not a file, not MCAP, no IMU topic, ambiguous or unknown ``topic``.
@@ -415,7 +445,8 @@ def decode(
     def wanted(channel: Channel, schema: Schema | None) -> bool:
         return schema is not None and schema.name in kinds
 
-    channels: dict[str, _Columns] = defaultdict(_Columns)
+    skip = frozenset({"log_time_ns"} if keep_one_time_base else ())
+    channels: dict[str, _Columns] = defaultdict(lambda: _Columns(skip))
     topic_kind: dict[str, str] = {}
     all_topics: set[str] = set()
     metadata: dict[str, dict[str, str]] = {}
@@ -479,7 +510,12 @@ def decode(
     cols = channels[topic].concat()
     t_s, time_source = None, ""
     if columns is None or "t_s" in columns:
-        t_s, time_source = _choose_time_base(cols["stamp_ns"], cols.pop("log_time_ns"), warnings)
+        use_log = _uses_log_time(channels[topic].steps, warnings)
+        if use_log and "log_time_ns" not in cols:  # counted, not kept: read again, keeping it
+            return decode(path, topic, progress, columns)
+        keep_stamps = columns is None or not columns.isdisjoint({"stamp_ns", "temp_c"})
+        t_s = _seconds(cols, use_log, keep_stamps)
+        time_source = "log_time" if use_log else "header.stamp"
     if topic_kind[topic] == "adis16364":
         if METADATA_NAME not in metadata:
             raise InputError(

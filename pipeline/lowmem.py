@@ -160,7 +160,7 @@ def analyze_low_memory(
     def decode_pass(k: int, what: str, columns: frozenset[str]):
         _release_freed_memory()
         with progress.stage(f"decode {k}/{passes} {what}", size, "bytes") as advance:
-            return decode(path, topic=options.topic, progress=advance, columns=columns)
+            return decode(path, options.topic, advance, columns, keep_one_time_base=True)
 
     with progress.stage("compile", 1, "step"):
         _load_kernels(options.loop)

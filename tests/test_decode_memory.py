@@ -146,11 +146,14 @@ def test_subsets_equal_the_whole_decode(
     expected_t = (stamps - stamps[0]) / 1e9
     np.testing.assert_array_equal(f["t_s"].to_numpy(), expected_t)
     for columns in SUBSETS:
-        part = decode(path, columns=columns)
-        assert part.time_source == (whole.time_source if "t_s" in columns else "")
-        assert sorted(part.frames.columns) == sorted(columns)
-        expected = f.with_columns(nonfinite=pl.Series([i == 7_777 for i in range(f.height)]))
-        assert part.frames.equals(expected.select(part.frames.columns)), columns
+        for keep_one in (False, True):  # True: log time counted, not kept (read again if unset)
+            part = decode(path, columns=columns, keep_one_time_base=keep_one)
+            assert part.time_source == (whole.time_source if "t_s" in columns else "")
+            assert sorted(part.frames.columns) == sorted(columns)
+            expected = f.with_columns(nonfinite=pl.Series([i == 7_777 for i in range(f.height)]))
+            assert part.frames.equals(expected.select(part.frames.columns)), (columns, keep_one)
+            if "t_s" in columns:  # the time-base warning, once (not twice after a re-read)
+                assert part.warnings == whole.warnings
 
 
 def test_column_blocks_join_like_concatenate(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -177,7 +180,7 @@ def test_adis_subsets_equal_the_whole_decode(tmp_path: Path, monkeypatch: pytest
     assert f["saturated"].sum() == 1 and f["flag_nd"].all()
     assert f["gyro_y"].max() == pytest.approx(8191 * 0.05 * np.pi / 180)  # the rail, rad/s
     for columns in [*SUBSETS, frozenset({"counter", "supply_v", "flag_ea", "saturated"})]:
-        part = decode(path, columns=columns).frames
+        part = decode(path, columns=columns, keep_one_time_base=True).frames
         assert sorted(part.columns) == sorted(columns)
         expected = f.with_columns(nonfinite=pl.repeat(False, f.height, eager=True))
         assert part.equals(expected.select(part.columns)), columns
