@@ -69,7 +69,8 @@ class SparseCorrection:
         return SparseCorrection(self.index[lo:hi] - start, self.value[lo:hi])
 
 
-_NONE = SparseCorrection(np.empty(0, np.int64), np.empty(0))
+NO_CORRECTION = SparseCorrection(np.empty(0, np.int64), np.empty(0))
+"""The empty correction (nothing subtracted)."""
 
 
 def _columns(y: Rates) -> list[np.ndarray]:
@@ -80,7 +81,7 @@ def _columns(y: Rates) -> list[np.ndarray]:
 
 def _single(cols: list[np.ndarray], correction: SparseCorrection | None) -> SparseCorrection:
     if correction is None:
-        return _NONE
+        return NO_CORRECTION
     if len(cols) != 1:
         raise ValueError("a SparseCorrection applies to one 1-D rate series")
     return correction

@@ -252,13 +252,12 @@ def _decode_temperature_run(run: MessageRun, out: _Columns) -> None:
 
 
 def _adis_frame(
-    cols: dict[str, np.ndarray], device: adis.DeviceConfig, columns: frozenset[str] | None
+    cols: dict[str, np.ndarray], device: adis.DeviceConfig, n: int, columns: frozenset[str] | None
 ) -> pl.DataFrame:
     """Counts → SI columns with the device's scale factors: the decode contract's columns, or
-    only ``columns`` of them (``nonfinite`` is all false: the words are integers).  Each
-    integer column leaves ``cols`` (the caller's dict) as it is scaled, and stamps not asked for
-    as soon as :func:`decode` has made ``t_s``."""
-    n = len(next(iter(cols.values()))) if cols else 0
+    only ``columns`` of them (``nonfinite`` is all false: the words are integers), ``n`` rows.
+    Each integer column leaves ``cols`` (the caller's dict) as it is scaled, and stamps not
+    asked for as soon as :func:`decode` has made ``t_s``."""
     if columns is not None and "stamp_ns" not in columns:
         cols.pop("stamp_ns", None)
     scale = dict.fromkeys(AXES[:3], device.gyro_scale_dps * RAD_PER_DEG)  # rad/s per LSB
@@ -296,16 +295,16 @@ def _map_chunks(
 def _imu_frame(
     cols: dict[str, np.ndarray],
     temp: dict[str, np.ndarray] | None,
+    n: int,
     columns: frozenset[str] | None = None,
 ) -> pl.DataFrame:
     """The decode contract's columns for an Imu channel, or only ``columns`` of them (plus
-    ``nonfinite`` when asked for; ``t_s`` is added by :func:`decode`).
+    ``nonfinite`` when asked for; ``t_s`` is added by :func:`decode`), ``n`` rows.
 
     Columns an Imu message does not carry are built as polars constants (an all-null Float64
     ``supply_v`` is a validity bitmap of n/8 bytes, not an n × 8-byte NaN array); ``temp_c`` is
     interpolated over the stamps into their own buffer when ``stamp_ns`` is not asked for.
     Stamps not asked for leave ``cols`` (the caller's dict) as soon as they are used."""
-    n = len(next(iter(cols.values()))) if cols else 0
     keep_stamps = columns is None or "stamp_ns" in columns
     if columns is not None and not columns & {"stamp_ns", "temp_c"}:
         cols.pop("stamp_ns", None)  # only needed for t_s, already made: freed before the frame
@@ -372,15 +371,15 @@ def _uses_log_time(steps: dict[str, _Steps], warnings: list[str]) -> bool:
 
 def _seconds(cols: dict[str, np.ndarray], use_log: bool, keep_stamps: bool) -> np.ndarray:
     """Seconds since the first frame (f64) on the chosen base, written over a buffer that is not
-    needed afterwards: the log time (popped from ``cols``), else the stamps themselves when
-    ``keep_stamps`` is false (the frame builders then drop ``cols["stamp_ns"]`` unread): the
-    time base costs no extra full-length array (24 h at 1 kHz: 691 MB each)."""
+    needed afterwards: the log time, else the stamps themselves when ``keep_stamps`` is false;
+    whichever is overwritten leaves ``cols``.  The time base costs no extra full-length array
+    (24 h at 1 kHz: 691 MB each)."""
     log = cols.pop("log_time_ns", None)
     base = log if use_log else cols["stamp_ns"]
     if log is not None:
         out = log.view(np.float64)
     elif not keep_stamps:
-        out = base.view(np.float64)
+        out = cols.pop("stamp_ns").view(np.float64)
     else:
         out = np.empty(len(base))
     first = base[0]
@@ -508,6 +507,7 @@ def decode(
     if topic not in channels:
         raise InputError(f"{path}: topic {topic} has no readable messages")
     cols = channels[topic].concat()
+    n = len(next(iter(cols.values()))) if cols else 0
     t_s, time_source = None, ""
     if columns is None or "t_s" in columns:
         use_log = _uses_log_time(channels[topic].steps, warnings)
@@ -531,13 +531,14 @@ def decode(
                 f"{path}: unreadable '{METADATA_NAME}' metadata record ({exc!r}): scale factors "
                 "unknown"
             ) from None
-        frames = _adis_frame(cols, device, columns)
+        frames = _adis_frame(cols, device, n, columns)
         source = SCHEMA_NAME
     else:
         temp_topic = _sibling_temperature(
             topic, [t for t, k in topic_kind.items() if k == "temperature" and t in channels]
         )
-        frames = _imu_frame(cols, channels[temp_topic].concat() if temp_topic else None, columns)
+        temp = channels[temp_topic].concat() if temp_topic else None
+        frames = _imu_frame(cols, temp, n, columns)
         device_meta = {}
         source = IMU_SCHEMA
     return ImuRecording(

@@ -31,7 +31,7 @@ import scipy.fft
 from scipy import special
 
 from pipeline import robust
-from pipeline.allan import SparseCorrection
+from pipeline.allan import NO_CORRECTION, SparseCorrection
 
 Z95 = float(special.ndtri(0.975))  # scipy.stats.norm.ppf, without importing scipy.stats
 CHI2_95 = float(2 * special.gammaincinv(0.5, 0.95))  # scipy.stats.chi2.ppf(0.95, 1)
@@ -459,6 +459,12 @@ def spike_candidate(y: np.ndarray, tau0: float) -> Candidate | None:
     )
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _hann(i: int, n: int) -> float:  # pragma: no cover (JIT)
+    """Weight i of the symmetric n-point Hann window of np.hanning."""
+    return 0.5 + 0.5 * np.cos(np.pi * (1 - n + 2 * i) / (n - 1)) if n > 1 else 1.0
+
+
 @numba.njit(cache=True, nogil=True)
 def _hann_windowed(
     y: np.ndarray, mean: float, fix_index: np.ndarray, fix_value: np.ndarray
@@ -472,16 +478,14 @@ def _hann_windowed(
     out = np.empty(n, np.float32)
     win_sum, win_sq_sum = 0.0, 0.0
     for i in range((n + 1) // 2):
-        w = 0.5 + 0.5 * np.cos(np.pi * (1 - n + 2 * i) / (n - 1)) if n > 1 else 1.0
+        w = _hann(i, n)
         pair = 1.0 if i == n - 1 - i else 2.0
         out[i] = (y[i] - mean) * w
         out[n - 1 - i] = (y[n - 1 - i] - mean) * w
         win_sum += pair * w
         win_sq_sum += pair * w * w
     for k in range(fix_index.size):
-        i = fix_index[k]
-        w = 0.5 + 0.5 * np.cos(np.pi * (1 - n + 2 * i) / (n - 1)) if n > 1 else 1.0
-        out[i] -= fix_value[k] * w
+        out[fix_index[k]] -= fix_value[k] * _hann(fix_index[k], n)
     return out, win_sum, win_sq_sum
 
 
@@ -507,7 +511,7 @@ def psd_line(
     """
     n = min(len(y), PSD_MAX_SAMPLES)
     y = y[:n]
-    fix = (correction or SparseCorrection(np.empty(0, np.int64), np.empty(0))).within(0, n)
+    fix = (correction or NO_CORRECTION).within(0, n)
     mean = (y.sum() - fix.value.sum()) / n
     windowed, win_sum, win_sq_sum = _hann_windowed(y, mean, fix.index, fix.value)
     coef = scipy.fft.rfft(windowed, overwrite_x=True)

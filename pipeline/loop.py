@@ -344,9 +344,8 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
     rejected: dict[str, dict] = {}
     extra_terms: dict[str, dict] = {}
     fit, good = fit0, good0
-    temp_d, supply_d = signals.temp_d, signals.supply_d
     for _ in range(MAX_ROUNDS):
-        trials = _evaluate(ax, state, fit, good, temp_d, supply_d)
+        trials = _evaluate(ax, state, fit, good)
         trials.sort(key=lambda t: -t["margin"])
         chosen = None
         for t in trials:
@@ -444,7 +443,7 @@ def noise_psd(fit: ieee952.CompositeFit, column_params: dict[str, float]) -> eff
     )
 
 
-def _evaluate(ax: _Axis, state: _State, fit, good, temp_d, supply_d) -> list[dict]:
+def _evaluate(ax: _Axis, state: _State, fit, good) -> list[dict]:
     """Evaluate every candidate against the current state (significance, hold-out, flags).
 
     Time-domain candidates are estimated by spectral GLS whitened with the current model's
@@ -455,8 +454,8 @@ def _evaluate(ax: _Axis, state: _State, fit, good, temp_d, supply_d) -> list[dic
     whiten = effects.Whitener(noise_psd(fit, state.column_params), len(state.y_d), dt)
     trials = []
     time_domain = [
-        effects.coupling_candidate("temperature", state.y_d, temp_d, dt, "degC", whiten),
-        effects.coupling_candidate("supply", state.y_d, supply_d, dt, "V", whiten),
+        effects.coupling_candidate("temperature", state.y_d, ax.sig.temp_d, dt, "degC", whiten),
+        effects.coupling_candidate("supply", state.y_d, ax.sig.supply_d, dt, "V", whiten),
         effects.step_candidate(state.y_d, dt, whiten),
         effects.warmup_candidate(state.y_d, dt, whiten),
         # spikes: one candidate, from the raw series' robust statistics (found once, whole)

@@ -129,7 +129,7 @@ def _load_kernels(loop: bool) -> None:
     """Have the kernels compiled into numba's disk cache by a child process, then load them.
 
     Compiling in this process on a first run after installing keeps ~0.2 GB of LLVM's memory
-    resident under the data (24 h / 1 kHz, cold cache: peak 1.97 GB against 1.76 GB warm);
+    resident under the data (24 h / 1 kHz, cold cache: peak 2.02 GB against 1.81 GB warm);
     a child's memory leaves with it.  Loading from the cache costs this process little.  If the
     child fails (e.g. a read-only cache), the kernels are compiled here as before."""
     code = f"from pipeline.lowmem import compile_kernels; compile_kernels({loop})"

@@ -28,15 +28,24 @@ from pipeline.simulator import VirtualADIS16364
 N = 24_000  # 100 Hz, 4 min
 
 
-def adis_recording(path: Path) -> Path:
-    config = config_for_rate(100.0)
-    block = VirtualADIS16364(config, None, seed=3).frames(N)
-    block.burst[N // 3, 2] = 0x9FFF  # ND + gyro_y at +8191 (rail): the frame is cut out
+def recording(path: Path, rate_hz: float, frames: int, seed: int, edit=None) -> Path:
+    """An ADIS16364 recording of the virtual device; ``edit(block)`` alters its words first."""
+    config = config_for_rate(rate_hz)
+    block = VirtualADIS16364(config, None, seed=seed).frames(frames)
+    if edit is not None:
+        edit(block)
     with open(path, "wb") as f:
         writer = FrameWriter(f, config)
         writer.write(block)
         writer.finish()
     return path
+
+
+def adis_recording(path: Path) -> Path:
+    def rail(block) -> None:  # ND + gyro_y at +8191 (rail): the frame is cut out
+        block.burst[N // 3, 2] = 0x9FFF
+
+    return recording(path, 100.0, N, seed=3, edit=rail)
 
 
 def imu_bag(path: Path) -> Path:
@@ -103,13 +112,7 @@ def test_envelope_keeps_extremes_and_stamps_order() -> None:
 def test_fastest_rate_model_below_fit_range_is_null_not_nan_warning(tmp_path: Path) -> None:
     """At 819.2 SPS the fitted prefilter term −P/τ² makes the model negative at the two
     shortest τ (below the fitted range): no sqrt/log of a negative, null in the report."""
-    config = config_for_rate(819.2)
-    block = VirtualADIS16364(config, None, seed=4).frames(120_000)
-    path = tmp_path / "fast.mcap"
-    with open(path, "wb") as f:
-        writer = FrameWriter(f, config)
-        writer.write(block)
-        writer.finish()
+    path = recording(tmp_path / "fast.mcap", 819.2, 120_000, seed=4)
     report, _ = run(path, tmp_path / "out", 2_000_000_000)
     allan = report["axes"]["gyro_x"]["allan"]
     assert allan["model_adev_before"][0] is None
