@@ -20,7 +20,7 @@ import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from pipeline.units import RAD_PER_DEG, STANDARD_GRAVITY
+from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
 
 T0_NS = 1_500_000_000_000_000_000
 

@@ -2,7 +2,7 @@
 
 Data: 12 h at 100 Hz (4.32 M samples) x 6 axes of simulated IMU rates (white noise plus a
 slow random walk, mean removed so allantools' undetrended phase loses no digits).  Both run
-in this process on the default tau grid (:func:`pipeline.allan.tau_factors`); prints the time
+in this process on the default tau grid (:func:`imupipe.stats.allan.tau_factors`); prints the time
 of each, the speed ratio and the largest relative difference.
 
     python benchmarks/bench_allan.py [--samples N] [--axes K]
@@ -16,7 +16,7 @@ import time
 import allantools
 import numpy as np
 
-from pipeline.allan import oadev, tau_factors
+from imupipe.stats.allan import oadev, tau_factors
 
 
 def main() -> None:

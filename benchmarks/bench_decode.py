@@ -2,7 +2,7 @@
 
 The baseline only iterates the messages (no CDR decoding at all), so the ratio understates our
 advantage.  Also reports the whole ``imupipe analyze`` wall time (all stages, rrd included) and
-its peak memory, run as a user runs it (``python -m pipeline analyze``, a child process).
+its peak memory, run as a user runs it (``python -m imupipe analyze``, a child process).
 
 Usage: ``python benchmarks/bench_decode.py [--hours 12] [--rate 100] [--file FILE]``
 """
@@ -19,10 +19,10 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from pipeline.adis16364 import config_for_rate
-from pipeline.decode import decode
-from pipeline.recorder import record
-from pipeline.simulator import VirtualADIS16364
+from imupipe.device.adis16364 import config_for_rate
+from imupipe.io.decode import decode
+from imupipe.record.recorder import record
+from imupipe.record.simulator import VirtualADIS16364
 
 
 def iter_messages(path: Path) -> int:
@@ -53,7 +53,7 @@ def main() -> None:
         base = time.perf_counter() - start
         assert count == frames, (count, frames)
         start = time.perf_counter()
-        cmd = [sys.executable, "-m", "pipeline", "analyze", str(path), "-q", "--out"]
+        cmd = [sys.executable, "-m", "imupipe", "analyze", str(path), "-q", "--out"]
         subprocess.run([*cmd, str(Path(tmp) / "out")], check=True)
         whole = time.perf_counter() - start
     peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024

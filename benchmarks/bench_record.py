@@ -17,8 +17,8 @@ from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
-from pipeline.adis16364 import config_for_rate
-from pipeline.frame_schema import (
+from imupipe.device.adis16364 import config_for_rate
+from imupipe.device.frame_schema import (
     DEFAULT_TOPIC,
     MESSAGE_ENCODING,
     PROFILE,
@@ -27,8 +27,8 @@ from pipeline.frame_schema import (
     encode_frames,
     message_definition,
 )
-from pipeline.recorder import record
-from pipeline.simulator import VirtualADIS16364
+from imupipe.record.recorder import record
+from imupipe.record.simulator import VirtualADIS16364
 
 
 def bare_loop(path: Path, payloads: list[bytes], stamps: list[int]) -> float:

@@ -1,11 +1,11 @@
 """Scale benchmark: a long, fast ROS 2 Imu recording through ``imupipe analyze``.
 
 Writes ``--hours`` h at ``--rate`` Hz (default 24 h at 1 kHz: 86.4 M ``sensor_msgs/msg/Imu``
-messages, plus ``sensor_msgs/msg/Temperature`` at 1 Hz) with :class:`pipeline.mcap_bulk.
+messages, plus ``sensor_msgs/msg/Temperature`` at 1 Hz) with :class:`imupipe.io.mcap_bulk.
 BulkWriter` in blocks of ``--block-s`` seconds, so the generator never holds more than one
 block.  Each axis is white noise (gyro 1e-3 rad/s, accel 3e-3 m/s² per sample) plus a sum of
 three first-order Gauss-Markov processes (time constants 10, 100, 1000 s: a flicker-like
-plateau), their state carried across blocks.  Then ``python -m pipeline analyze FILE`` runs in
+plateau), their state carried across blocks.  Then ``python -m imupipe analyze FILE`` runs in
 a child process; prints its wall time and peak RSS (``getrusage(RUSAGE_CHILDREN).ru_maxrss``).
 
     python benchmarks/bench_scale.py --hours 2 --rate 1000 --file /tmp/scale_2h.mcap
@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA
-from pipeline.mcap_bulk import BulkWriter
-from pipeline.ros_cdr import imu_payloads, temperature_payloads
+from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA
+from imupipe.io.mcap_bulk import BulkWriter
+from imupipe.testing.ros_cdr import imu_payloads, temperature_payloads
 
 WHITE = np.array([1e-3] * 3 + [3e-3] * 3)  # per-sample sigma: gyro rad/s, accel m/s²
 GM_TC_S = np.array([10.0, 100.0, 1000.0])  # Gauss-Markov time constants, s
@@ -105,7 +105,7 @@ def main() -> None:
             f"in {time.perf_counter() - t:.1f} s"
         )
     out = args.out or args.file.with_suffix(".imupipe")
-    cmd = [sys.executable, "-m", "pipeline", "analyze", str(args.file), "--out", str(out), "-q"]
+    cmd = [sys.executable, "-m", "imupipe", "analyze", str(args.file), "--out", str(out), "-q"]
     t = time.perf_counter()
     subprocess.run([*cmd, *args.analyze_args], check=True)
     wall = time.perf_counter() - t

@@ -3,7 +3,7 @@
 Each seed records ``--hours`` of the virtual ADIS16364 (paper noise: white, flicker, rate random
 walk; no effect) at ``--rate`` Hz with a realistic slow lab temperature profile (warm-up of
 2.5 °C in 30 min, then a slow wander and a ±0.3 °C air-conditioning cycle of 50 min) on the TEMP
-registers and a constant supply; every axis goes through :func:`pipeline.loop.close_loop`.
+registers and a constant supply; every axis goes through :func:`imupipe.model.loop.close_loop`.
 Prints the share of axes with any accepted effect (target ≤ 5 %), per kind and per axis, with
 a 95 % Clopper–Pearson interval, and the loop's mean time per recording.
 
@@ -19,17 +19,17 @@ from collections import Counter
 import numpy as np
 from scipy import stats
 
-from pipeline.adis16364 import (
+from imupipe.device.adis16364 import (
     SUPPLY_V_PER_LSB,
     TEMP_C_PER_LSB,
     TEMP_ZERO_C,
     DeviceConfig,
     burst_counts,
 )
-from pipeline.allan import allan_curves
-from pipeline.loop import AxisSignals, aux_block_means, close_loop
-from pipeline.scenario import AXES, Scenario, Temperature, sensor_of, si_per_unit
-from pipeline.simulator import VirtualADIS16364
+from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
+from imupipe.record.scenario import AXES, Scenario, Temperature, sensor_of, si_per_unit
+from imupipe.record.simulator import VirtualADIS16364
+from imupipe.stats.allan import allan_curves
 
 LAB_TEMPERATURE = Temperature(
     points=((0.0, 21.0), (1800.0, 23.5), (5400.0, 24.0), (10800.0, 23.6), (43200.0, 24.2)),

@@ -21,11 +21,11 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-import pipeline.analyze as analyze_module
-import pipeline.loop as loop_module
-import pipeline.lowmem as lowmem_module
-from pipeline.analyze import AnalyzeOptions, analyze
-from pipeline.progress import StageProgress
+import imupipe.analysis.analyze as analyze_module
+import imupipe.analysis.lowmem as lowmem_module
+import imupipe.model.loop as loop_module
+from imupipe.analysis.analyze import AnalyzeOptions, analyze
+from imupipe.progress import StageProgress
 
 PAGE = resource.getpagesize()
 

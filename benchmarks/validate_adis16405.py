@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.allan import oadev, phase
+from imupipe.stats.allan import oadev, phase
 
 DEFAULT_DIR = Path("/work/shared/reference/adis16405")
 

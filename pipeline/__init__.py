@@ -1,3 +1,39 @@
-"""imupipe: record ADIS16364 frames into MCAP and analyse their noise (Allan, IEEE 952)."""
+"""imupipe: record ADIS16364 frames into MCAP and analyse IMU noise (overlapping Allan
+deviation, IEEE Std 952 terms with intervals, a closed loop that finds what the model misses).
+
+The public API (imported on first use, so that ``imupipe.errors`` stays light)::
+
+    import imupipe
+    result = imupipe.analyze("run.mcap")          # writes run.imupipe/, returns AnalysisResult
+    result.to_dict()["axes"]["gyro_x"]["ieee952"]  # report.json, SI units
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
+__all__ = ["AnalysisResult", "ImupipeError", "RecordSummary", "__version__", "analyze", "record"]
+
+if TYPE_CHECKING:
+    from imupipe.analysis.results import AnalysisResult
+    from imupipe.api import analyze, record
+    from imupipe.errors import ImupipeError
+    from imupipe.record.recorder import RecordSummary
+
+_LAZY = {
+    "analyze": "imupipe.api",
+    "record": "imupipe.api",
+    "AnalysisResult": "imupipe.analysis.results",
+    "RecordSummary": "imupipe.record.recorder",
+    "ImupipeError": "imupipe.errors",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """PEP 562: load the public names on first access (numba, polars... only when used)."""
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'imupipe' has no attribute {name!r}")

@@ -1,3 +1,3 @@
-from pipeline.cli import main
+from imupipe.cli import main
 
 main()

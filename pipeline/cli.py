@@ -1,23 +1,22 @@
 """The ``imupipe`` command line: record, info, analyze, view, demo.
 
-Bad input never produces a traceback: every :class:`~pipeline.errors.ImupipeError` becomes one
+Bad input never produces a traceback: every :class:`~imupipe.errors.ImupipeError` becomes one
 line on stderr and exit code 2.  Set ``IMUPIPE_DEBUG=1`` to see tracebacks of internal errors.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import sys
-from dataclasses import replace
+from dataclasses import asdict, replace
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from pipeline.errors import ImupipeError
+from imupipe.errors import ImupipeError
 
 app = typer.Typer(
     add_completion=False,
@@ -52,28 +51,6 @@ def _warn(message: str) -> None:
     typer.echo(f"warning: {message}", err=True)
 
 
-def _make_source(
-    source: Source, rate: float, seed: int, scenario: Path | None, device: str, serial: int
-):
-    from pipeline.adis16364 import config_for_rate
-
-    try:
-        config = config_for_rate(rate, source=source.value, serial_number=serial)
-    except ValueError as exc:
-        raise ImupipeError(str(exc)) from None
-    if source is Source.sim:
-        from pipeline.scenario import load_scenario
-        from pipeline.simulator import VirtualADIS16364
-
-        loaded = load_scenario(scenario) if scenario else None
-        return VirtualADIS16364(config, loaded, seed=seed)
-    if scenario:
-        raise ImupipeError("--scenario applies to the simulator only (--source sim)")
-    from pipeline.spi import open_spi_source
-
-    return open_spi_source(device, config)
-
-
 @app.command()
 def record(
     output: Annotated[Path, typer.Option("--output", "-o", help="MCAP file to write.")] = Path(
@@ -99,41 +76,37 @@ def record(
     quiet: Quiet = False,
 ) -> None:
     """Record ADIS16364 frames into an MCAP file (default: the paper's 12 h static test)."""
-    from pipeline.progress import StageProgress
-    from pipeline.recorder import parse_duration, write_truth
-    from pipeline.recorder import record as run_record
+    from imupipe.api import record as run_record
 
-    seconds = parse_duration(duration)
-    frame_source = _make_source(source, rate, seed, scenario, device, serial)
-    n_frames = max(1, math.floor(seconds * frame_source.config.output_rate_hz + 0.5))
-    with StageProgress(quiet) as progress, progress.stage("record", n_frames, "frames") as advance:
-        summary = run_record(
-            output,
-            frame_source,
-            n_frames,
-            realtime=realtime or source is Source.spi,
-            progress=advance,
-        )
-    if truth is not None:
-        if source is not Source.sim:
-            raise ImupipeError("--truth is only known for the simulator (--source sim)")
-        write_truth(truth, frame_source.truth())
+    summary = run_record(
+        output,
+        duration=duration,
+        rate_hz=rate,
+        seed=seed,
+        scenario=scenario,
+        truth=truth,
+        source=source.value,
+        device=device,
+        serial=serial,
+        realtime=realtime,
+        progress=not quiet,
+    )
     if not quiet:
         typer.echo(
             f"{summary.path}: {summary.frames} frames, {summary.duration_s:.1f} s at "
-            f"{frame_source.config.output_rate_hz:g} Hz ({frame_source.config.rate_method}), "
+            f"{summary.rate_hz:g} Hz ({summary.rate_method}), "
             f"{summary.path.stat().st_size / 1e6:.1f} MB"
         )
     if summary.stop_signal is not None:
         name = signal.Signals(summary.stop_signal).name
-        _warn(f"{name}: recorded {summary.frames} of {n_frames} frames; file finished")
+        _warn(f"{name}: recorded {summary.frames} of {summary.requested} frames; file finished")
         raise typer.Exit(128 + summary.stop_signal)  # the shell convention for a signal
 
 
 @app.command()
 def info(path: Annotated[Path, typer.Argument(help="MCAP file or rosbag2 directory.")]) -> None:
     """Show the topics, message counts, device metadata and any damage of a recording."""
-    from pipeline.info import describe
+    from imupipe.io.info import describe
 
     for line in describe(path).lines():
         typer.echo(line)
@@ -166,9 +139,10 @@ def analyze(
     quiet: Quiet = False,
 ) -> None:
     """Analyse a recording: Allan deviation, IEEE 952 terms, effects; write reports."""
-    from pipeline.analyze import AnalyzeOptions
+    from imupipe.analysis.analyze import AnalyzeOptions
+    from imupipe.api import default_out_dir
 
-    out_dir = out if out is not None else path.with_suffix(".imupipe")
+    out_dir = out if out is not None else default_out_dir(path)
     options = AnalyzeOptions(
         topic=topic,
         taus_per_decade=taus_per_decade,
@@ -180,7 +154,7 @@ def analyze(
     if topic != ALL_TOPICS:
         _analyze_one(path, out_dir, options, quiet)
         return
-    from pipeline.info import imu_topics
+    from imupipe.io.info import imu_topics
 
     topics = imu_topics(path)
     failed: list[str] = []
@@ -201,12 +175,10 @@ def analyze(
 
 def _analyze_one(path: Path, out_dir: Path, options, quiet: bool) -> None:
     """Analyse one IMU topic into ``out_dir``; print its warnings and table."""
-    from pipeline.analyze import analyze as run_analyze
-    from pipeline.progress import StageProgress
-    from pipeline.report import format_table
+    from imupipe.api import analyze as run_analyze
+    from imupipe.report.report import format_table
 
-    with StageProgress(quiet) as progress:
-        result = run_analyze(path, out_dir, options, progress)
+    result = run_analyze(path, out_dir, progress=not quiet, **asdict(options))
     for w in result.input.warnings:
         _warn(w)
     if not quiet:
@@ -219,7 +191,7 @@ def view(
     path: Annotated[Path, typer.Argument(help="Output folder of analyze, or an .rrd.")],
 ) -> None:
     """Open the Rerun viewer on an analysis' recording.rrd."""
-    from pipeline.rerun_view import open_viewer
+    from imupipe.report.rerun_view import open_viewer
 
     rrd = path / "recording.rrd" if path.is_dir() else path
     if not rrd.is_file():

@@ -22,7 +22,7 @@ SQRT_S_PER_SQRT_H = 60.0
 """√(3600 s) / √(1 s): one √h is 60 √s."""
 
 SI_PER_UNIT: dict[str, float] = {
-    # angular rate and its noise terms, SI (spelled as pipeline.ieee952.UNITS spells them)
+    # angular rate and its noise terms, SI (spelled as imupipe.model.ieee952.UNITS spells them)
     "rad/s": 1.0,
     "rad": 1.0,
     "rad/s/sqrt(Hz)": 1.0,
@@ -87,7 +87,7 @@ SI_UNIT: dict[Sensor, dict[Quantity, str]] = {
     },
 }
 """SI unit of each reported quantity (issue 3 report.json contract), spelled as
-:data:`pipeline.ieee952.UNITS` spells them."""
+:data:`imupipe.model.ieee952.UNITS` spells them."""
 
 PAPER_UNIT: dict[Sensor, dict[Quantity, str]] = {
     "gyro": {

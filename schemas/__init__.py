@@ -1,1 +1,1 @@
-"""Message and report schemas, installed as package data of ``pipeline.schemas``."""
+"""Message and report schemas, installed as package data of ``imupipe.schemas``."""

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pipeline.adis16364 import (
+from imupipe.device.adis16364 import (
     BURST_BITS,
     BURST_COMMAND,
     BURST_SIGNED,
@@ -22,6 +22,7 @@ from pipeline.adis16364 import (
     gyro_scale_dps,
     sample_rate_sps,
 )
+from imupipe.errors import ConfigError
 
 
 @given(st.integers(-8192, 8191))
@@ -81,7 +82,7 @@ def test_burst_layout_and_decode():
 def test_scales_and_rates():
     assert gyro_scale_dps(0x0402) == 0.05
     assert gyro_scale_dps(0x0202) == 0.025
-    with pytest.raises(ValueError):
+    with pytest.raises(ConfigError, match="no valid gyro range"):
         gyro_scale_dps(0x0302)
     assert bartlett_taps(0x0402) == 4
     assert sample_rate_sps(0x0001) == pytest.approx(819.2, abs=0.01)

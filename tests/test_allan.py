@@ -6,8 +6,8 @@ import allantools
 import numpy as np
 import pytest
 
-from pipeline import allan
-from pipeline.allan import allan_curves, oadev, phase, tau_factors
+from imupipe.stats import allan
+from imupipe.stats.allan import allan_curves, oadev, phase, tau_factors
 
 
 def nist_1000() -> np.ndarray:
@@ -124,7 +124,7 @@ def test_allan_curves_one_per_column():
 
 def test_sparse_correction_equals_corrected_copy():
     """Spikes removed on the fly (SparseCorrection) give the ADEV of the corrected series."""
-    from pipeline.allan import SparseCorrection
+    from imupipe.stats.allan import SparseCorrection
 
     rng = np.random.default_rng(4)
     y = rng.standard_normal(20_000)

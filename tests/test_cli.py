@@ -1,5 +1,5 @@
 """The command line as a user meets it (issue 3 "CLI behaviour", issue 5 "bad data"): a separate
-``python -m pipeline`` process for a representative set of cases (they run concurrently; each pays
+``python -m imupipe`` process for a representative set of cases (they run concurrently; each pays
 ~2 s of imports), the same entry point in process for the others: bad input exits 2 with exactly
 one line on stderr and no traceback, a good recording exits 0 with its reports."""
 
@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.adis16364 import FrameBlock, config_for_rate
-from pipeline.cli import main
-from pipeline.mcap_bulk import BulkWriter
-from pipeline.recorder import FrameWriter
-from pipeline.simulator import VirtualADIS16364
+from imupipe.cli import main
+from imupipe.device.adis16364 import FrameBlock, config_for_rate
+from imupipe.io.mcap_bulk import BulkWriter
+from imupipe.record.recorder import FrameWriter
+from imupipe.record.simulator import VirtualADIS16364
 
 CONFIG = config_for_rate(100.0)
 
@@ -68,7 +68,7 @@ def make_inputs(d: Path) -> dict[str, tuple[Path, str]]:
 
 def imupipe(*args: str) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "pipeline", *args],
+        [sys.executable, "-m", "imupipe", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -79,7 +79,7 @@ SUBPROCESS = {"missing", "random", "no_imu", "one_frame"}
 
 
 def in_process(args: list[str], capsys) -> tuple[int, str, str]:
-    """:func:`pipeline.cli.main` with ``args``: exit code, stdout, stderr."""
+    """:func:`imupipe.cli.main` with ``args``: exit code, stdout, stderr."""
     old = sys.argv
     sys.argv = ["imupipe", *args]
     try:

@@ -8,10 +8,10 @@ import numpy as np
 import polars as pl
 import pytest
 
-from pipeline.condition import condition
-from pipeline.decode import ImuRecording
-from pipeline.errors import ImupipeError
-from pipeline.results import AXES
+from imupipe.analysis.condition import condition
+from imupipe.analysis.results import AXES
+from imupipe.errors import ImupipeError
+from imupipe.io.decode import ImuRecording
 
 
 def recording(n: int = 1000, rate: float = 100.0, seed: int = 0, **edits) -> ImuRecording:
@@ -164,7 +164,7 @@ def test_single_frame_is_an_error() -> None:
 def test_chunked_step_scan_equals_one_pass(monkeypatch, chunk) -> None:
     """Steps are examined a chunk at a time (no full-length step array): every break, count
     and warning must equal the one-pass result, also for bad stamps on chunk boundaries."""
-    import pipeline.condition as cond
+    import imupipe.analysis.condition as cond
 
     def anomalies(a):
         a[7] = a[6]  # duplicate at a boundary of chunks of 7

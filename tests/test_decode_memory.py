@@ -1,4 +1,4 @@
-"""Memory of :func:`pipeline.decode.decode` with a column subset (the low-memory path's passes).
+"""Memory of :func:`imupipe.io.decode.decode` with a column subset (the low-memory path's passes).
 
 A 24 h / 1 kHz recording has 86.4 M frames: one float64 column is 691 MB, and the 2 GB budget
 of issue 5 leaves room for about two.  The peak of a decoding pass is measured in a fresh
@@ -20,10 +20,10 @@ import numpy as np
 import polars as pl
 import pytest
 
-from pipeline import decode as dec
-from pipeline.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, decode
-from pipeline.mcap_bulk import BulkWriter
-from pipeline.ros_cdr import imu_payloads, temperature_payloads
+from imupipe.io import decode as dec
+from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, decode
+from imupipe.io.mcap_bulk import BulkWriter
+from imupipe.testing.ros_cdr import imu_payloads, temperature_payloads
 
 T0_NS = 1_700_000_000_000_000_000
 CHUNK = 2_000
@@ -64,8 +64,8 @@ MEASURE = """
 import sys
 from pathlib import Path
 import polars as pl
-import pipeline.decode as dec
-from pipeline.lowmem import _release_freed_memory
+import imupipe.io.decode as dec
+from imupipe.analysis.lowmem import _release_freed_memory
 
 def status(key):
     with open("/proc/self/status") as f:
@@ -73,7 +73,7 @@ def status(key):
 
 dec._CHUNK = 1 << 16  # temporaries of 0.5 MB: the fixed costs stay small next to 24 MB columns
 pl.repeat(None, 1, dtype=pl.UInt32, eager=True)  # polars' first call commits ~9 MB (once)
-_release_freed_memory()  # as before each pass of pipeline.lowmem
+_release_freed_memory()  # as before each pass of imupipe.analysis.lowmem
 with open("/proc/self/clear_refs", "w") as f:
     f.write("5")  # VmHWM := VmRSS (proc(5), Linux >= 4.0)
 before = status("VmRSS:")

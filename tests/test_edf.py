@@ -16,8 +16,8 @@ import pytest
 from scipy.stats import chi2
 from test_allan import nist_1000  # tests/ is on sys.path (pytest prepend import mode)
 
-from pipeline.allan import allan_curves, phase
-from pipeline.edf import (
+from imupipe.stats.allan import allan_curves, phase
+from imupipe.stats.edf import (
     acf_noise_id,
     b1_noise_id,
     b1_theory,
@@ -133,7 +133,7 @@ def test_chi2_interval_definition_and_coverage():
 
 def test_mvar_over_avar_streams_the_numpy_formula():
     """R(n) without record-length arrays equals the numpy form of NIST SP 1065 eqs. (11), (14)."""
-    from pipeline.edf import _mvar_over_avar
+    from imupipe.stats.edf import _mvar_over_avar
 
     rng = np.random.default_rng(8)
     x = np.cumsum(rng.standard_normal(5_001))

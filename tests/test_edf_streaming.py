@@ -1,6 +1,6 @@
 """The streaming lag-1 ACF noise identification equals, to the bit, the in-place algorithm.
 
-``_oracle_*`` below is the previous implementation of pipeline.edf (detrend and difference a
+``_oracle_*`` below is the previous implementation of imupipe.stats.edf (detrend and difference a
 copy of the m-averaged series in place; Riley & Greenhall 2004), kept unchanged as the oracle:
 the streaming kernel must form the same float64 values in the same order, so every r1, and
 hence every alpha, is identical, while allocating nothing proportional to the series length.
@@ -16,7 +16,7 @@ import numba
 import numpy as np
 import pytest
 
-from pipeline.edf import ACF_MIN_POINTS, _acf_pass, _acf_power, acf_noise_id, noise_ids
+from imupipe.stats.edf import ACF_MIN_POINTS, _acf_pass, _acf_power, acf_noise_id, noise_ids
 
 
 @numba.njit
@@ -174,8 +174,8 @@ def test_acf_pass_matches_direct_sums():
 _RSS_SCRIPT = """
 import os, threading, time
 import numpy as np
-from pipeline import edf
-from pipeline.edf import noise_ids
+from imupipe.stats import edf
+from imupipe.stats.edf import noise_ids
 edf.ACF_COPY_MAX = 1 << 16  # m-averaged series longer than 0.5 MB are streamed from the phase
 x = np.concatenate(([0.0], np.cumsum(np.random.default_rng(1).standard_normal(8_000_000))))
 m = np.array([1, 2, 3, 1000])

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from test_ieee952 import B_TRUE, N_TRUE, synth_rate
 
-from pipeline import effects, loop
-from pipeline.allan import allan_curves
+from imupipe.model import effects, loop
+from imupipe.stats.allan import allan_curves
 
 TAU0, N = 0.1, 2**16
 

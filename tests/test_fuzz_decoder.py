@@ -1,8 +1,8 @@
 """Fuzzing the decoder (issue 5): truncations, bit flips, random bytes and random schemas/records.
 
-Whatever the bytes, stage 1 (:func:`pipeline.decode.decode`) and ``imupipe info``
-(:func:`pipeline.info.describe`) either return or raise our clean
-:class:`~pipeline.errors.ImupipeError` (one line, exit 2 at the command line): no other exception
+Whatever the bytes, stage 1 (:func:`imupipe.io.decode.decode`) and ``imupipe info``
+(:func:`imupipe.io.info.describe`) either return or raise our clean
+:class:`~imupipe.errors.ImupipeError` (one line, exit 2 at the command line): no other exception
 may escape.  Each property runs a fixed number of cases (``EXAMPLES``, derandomised so a run is
 reproducible); the count actually run is printed (``pytest -s``).
 """
@@ -20,10 +20,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.writer import Writer
 
-from pipeline.adis16364 import DeviceConfig, FrameBlock
-from pipeline.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, decode
-from pipeline.errors import ImupipeError
-from pipeline.frame_schema import (
+from imupipe.device.adis16364 import DeviceConfig, FrameBlock
+from imupipe.device.frame_schema import (
     DEFAULT_TOPIC,
     MESSAGE_ENCODING,
     METADATA_NAME,
@@ -32,8 +30,10 @@ from pipeline.frame_schema import (
     encode_frames,
     message_definition,
 )
-from pipeline.info import describe
-from pipeline.recorder import FrameWriter
+from imupipe.errors import ImupipeError
+from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, decode
+from imupipe.io.info import describe
+from imupipe.record.recorder import FrameWriter
 
 EXAMPLES = 50
 FUZZ = settings(

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from pipeline import ieee952
-from pipeline.allan import allan_curves, tau_factors
+from imupipe.model import ieee952
+from imupipe.stats.allan import allan_curves, tau_factors
 
 DEG = np.pi / 180
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from test_ieee952 import B_TRUE, N_TRUE, synth_rate
 
-from pipeline.allan import allan_curves
-from pipeline.effects import CHI2_95
-from pipeline.loop import AxisSignals, aux_block_means, close_loop
+from imupipe.model.effects import CHI2_95
+from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
+from imupipe.stats.allan import allan_curves
 
 TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
 

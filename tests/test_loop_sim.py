@@ -15,17 +15,16 @@ from functools import cache
 import numpy as np
 import pytest
 
-from pipeline.adis16364 import (
+from imupipe.device.adis16364 import (
     SUPPLY_V_PER_LSB,
     TEMP_C_PER_LSB,
     TEMP_ZERO_C,
     DeviceConfig,
     burst_counts,
 )
-from pipeline.allan import allan_curves
-from pipeline.effects import CHI2_95, gauss_markov_avar
-from pipeline.loop import AxisSignals, LoopResult, aux_block_means, close_loop
-from pipeline.scenario import (
+from imupipe.model.effects import CHI2_95, gauss_markov_avar
+from imupipe.model.loop import AxisSignals, LoopResult, aux_block_means, close_loop
+from imupipe.record.scenario import (
     AXES,
     BiasStep,
     Drift,
@@ -38,7 +37,8 @@ from pipeline.scenario import (
     sensor_of,
     si_per_unit,
 )
-from pipeline.simulator import VirtualADIS16364
+from imupipe.record.simulator import VirtualADIS16364
+from imupipe.stats.allan import allan_curves
 
 HOURS, RATE_HZ = 3.0, 10.0
 DEG = np.pi / 180

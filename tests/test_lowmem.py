@@ -15,15 +15,15 @@ import numpy as np
 import polars as pl
 import pytest
 
-from pipeline.adis16364 import config_for_rate
-from pipeline.analyze import AnalyzeOptions, analyze
-from pipeline.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA
-from pipeline.lowmem import envelope, envelope_times, peak_estimate
-from pipeline.mcap_bulk import BulkWriter
-from pipeline.progress import StageProgress
-from pipeline.recorder import FrameWriter
-from pipeline.ros_cdr import imu_payloads, temperature_payloads
-from pipeline.simulator import VirtualADIS16364
+from imupipe.analysis.analyze import AnalyzeOptions, analyze
+from imupipe.analysis.lowmem import envelope, envelope_times, peak_estimate
+from imupipe.device.adis16364 import config_for_rate
+from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA
+from imupipe.io.mcap_bulk import BulkWriter
+from imupipe.progress import StageProgress
+from imupipe.record.recorder import FrameWriter
+from imupipe.record.simulator import VirtualADIS16364
+from imupipe.testing.ros_cdr import imu_payloads, temperature_payloads
 
 N = 24_000  # 100 Hz, 4 min
 

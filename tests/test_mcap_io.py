@@ -14,17 +14,17 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from pipeline.adis16364 import DeviceConfig, FrameBlock
-from pipeline.decode import decode
-from pipeline.errors import InputError
-from pipeline.frame_schema import (
+from imupipe.device.adis16364 import DeviceConfig, FrameBlock
+from imupipe.device.frame_schema import (
     decode_frames,
     encode_frames,
     frame_dtype,
 )
-from pipeline.info import describe
-from pipeline.mcap_scan import NotMcapError
-from pipeline.recorder import FrameWriter
+from imupipe.errors import InputError
+from imupipe.io.decode import decode
+from imupipe.io.info import describe
+from imupipe.io.mcap_scan import NotMcapError
+from imupipe.record.recorder import FrameWriter
 
 T0 = 1_700_000_000_000_000_000
 

@@ -2,7 +2,7 @@
 
 Each case is a small recording (2 min at 100 Hz from the virtual ADIS16364, or a
 ``sensor_msgs/msg/Imu`` stream), edited to break one assumption, then analysed by the command
-line's own entry point (:func:`pipeline.cli.main`, in process to save the interpreter start-up);
+line's own entry point (:func:`imupipe.cli.main`, in process to save the interpreter start-up);
 the checks read ``report.json``: the right warnings, the documented policy applied (the longest
 clean segment), and no Allan deviation computed over a break.  Exit codes and the one-line
 errors of a separate process are in ``test_cli.py``.
@@ -22,9 +22,9 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from pipeline.adis16364 import EA_BIT, FrameBlock, config_for_rate
-from pipeline.cli import main, topic_folder
-from pipeline.frame_schema import (
+from imupipe.cli import main, topic_folder
+from imupipe.device.adis16364 import EA_BIT, FrameBlock, config_for_rate
+from imupipe.device.frame_schema import (
     DEFAULT_TOPIC,
     MESSAGE_ENCODING,
     METADATA_NAME,
@@ -34,10 +34,10 @@ from pipeline.frame_schema import (
     encode_frames,
     message_definition,
 )
-from pipeline.mcap_bulk import BulkWriter
-from pipeline.recorder import FrameWriter
-from pipeline.ros_cdr import imu_payloads
-from pipeline.simulator import VirtualADIS16364
+from imupipe.io.mcap_bulk import BulkWriter
+from imupipe.record.recorder import FrameWriter
+from imupipe.record.simulator import VirtualADIS16364
+from imupipe.testing.ros_cdr import imu_payloads
 
 RATE_HZ = 100.0
 N = 12_000  # 2 min

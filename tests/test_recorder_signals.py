@@ -16,13 +16,13 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from pipeline.decode import decode
+from imupipe.io.decode import decode
 
 RATE_HZ = 100.0
 
 
 def start_recorder(out: Path, *extra: str, **popen) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "pipeline", "record", "-o", str(out), "-q", *extra]
+    cmd = [sys.executable, "-m", "imupipe", "record", "-o", str(out), "-q", *extra]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
 
 

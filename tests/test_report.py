@@ -12,12 +12,11 @@ import polars as pl
 import pytest
 from scipy.stats import chi2
 
-allan = pytest.importorskip("pipeline.allan", reason="pipeline.allan has not landed yet")
-ieee952 = pytest.importorskip("pipeline.ieee952", reason="pipeline.ieee952 has not landed yet")
-
-from pipeline.report import format_table, kalibr_yaml, write_report  # noqa: E402
-from pipeline.results import AnalysisResult, AxisResult, InputSummary  # noqa: E402
-from pipeline.units import SI_UNIT, from_si, to_si  # noqa: E402
+from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
+from imupipe.model import ieee952
+from imupipe.report.report import format_table, kalibr_yaml, write_report
+from imupipe.stats import allan
+from imupipe.units import SI_UNIT, from_si, to_si
 
 SCHEMA = Path(__file__).resolve().parents[1] / "schemas" / "report.schema.json"
 RATE_HZ = 100.0
@@ -79,7 +78,7 @@ def _terms(sensor: str, n: float, b: float, k: float | None):
 
 @dataclass
 class StandInLoop:
-    """Duck-typed stand-in for pipeline.loop.LoopResult (its contract, issue 4)."""
+    """Duck-typed stand-in for imupipe.model.loop.LoopResult (its contract, issue 4)."""
 
     terms_before: object
     terms_after: object

@@ -10,12 +10,10 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 import pytest
-
-pytest.importorskip("pipeline.allan", reason="pipeline.allan has not landed yet")
-
 from test_report import synthetic_result
 
-from pipeline.rerun_view import open_viewer, rerun_executable, signal_columns, write_rrd
+from imupipe.errors import ViewerError
+from imupipe.report.rerun_view import open_viewer, rerun_executable, signal_columns, write_rrd
 
 
 def _frames(n: int, ros: bool = False) -> pl.DataFrame:
@@ -86,5 +84,5 @@ def test_bulk_logging_is_fast(tmp_path: Path) -> None:
 
 
 def test_open_viewer_refuses_a_folder_without_recording(tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError, match="no Rerun recording"):
+    with pytest.raises(ViewerError, match="no Rerun recording"):
         open_viewer(tmp_path)

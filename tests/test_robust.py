@@ -1,11 +1,11 @@
-"""pipeline.robust (exact O(n) histogram selection, no copies) equals numpy bit for bit."""
+"""imupipe.stats.robust (exact O(n) histogram selection, no copies) equals numpy bit for bit."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from pipeline.robust import mad, median, median_positive
+from imupipe.stats.robust import mad, median, median_positive
 
 RNG = np.random.default_rng(5)
 CASES = {

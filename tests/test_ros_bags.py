@@ -10,8 +10,8 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from pipeline.decode import decode
-from pipeline.errors import InputError
+from imupipe.errors import InputError
+from imupipe.io.decode import decode
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 T0 = 1_700_000_000_000_000_000

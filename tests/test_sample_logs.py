@@ -7,12 +7,12 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.adis16364 import config_for_rate
-from pipeline.analyze import AnalyzeOptions, analyze
-from pipeline.progress import StageProgress
-from pipeline.recorder import record
-from pipeline.scenario import load_scenario
-from pipeline.simulator import VirtualADIS16364
+from imupipe.analysis.analyze import AnalyzeOptions, analyze
+from imupipe.device.adis16364 import config_for_rate
+from imupipe.progress import StageProgress
+from imupipe.record.recorder import record
+from imupipe.record.scenario import load_scenario
+from imupipe.record.simulator import VirtualADIS16364
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 

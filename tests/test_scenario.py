@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.scenario import (
+from imupipe.record.scenario import (
     RRW_CROSSOVER_S,
     Scenario,
     ScenarioError,

@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pipeline.adis16364 import (
+from imupipe.device.adis16364 import (
     DIAG_OVER_RANGE,
     EA_BIT,
     ND_BIT,
@@ -16,15 +16,16 @@ from pipeline.adis16364 import (
     burst_counts,
     config_for_rate,
 )
-from pipeline.noise import (
+from imupipe.errors import ConfigError
+from imupipe.record.noise import (
     FLICKER_PLATEAU,
     FlickerNoise,
     GaussMarkov,
     NormalStream,
     RateRandomWalk,
 )
-from pipeline.scenario import AXES, BiasStep, Scenario, Sinusoid, Spikes, Supply, Temperature
-from pipeline.simulator import VirtualADIS16364, bartlett_response, white_gain
+from imupipe.record.scenario import AXES, BiasStep, Scenario, Sinusoid, Spikes, Supply, Temperature
+from imupipe.record.simulator import VirtualADIS16364, bartlett_response, white_gain
 
 PAPER_N = {"gyro_x": 0.05, "gyro_y": 0.05, "gyro_z": 0.05,
            "accel_x": 0.29, "accel_y": 0.27, "accel_z": 0.28}  # fmt: skip
@@ -271,5 +272,5 @@ def test_register_writes_reconfigure():
     )
     word = dev.read_register(REGISTERS["XGYRO_OUT"])
     assert word & ND_BIT and not dev.read_register(REGISTERS["XGYRO_OUT"]) & ND_BIT
-    with pytest.raises(ValueError):
+    with pytest.raises(ConfigError, match="smpl_prd"):
         VirtualADIS16364(DeviceConfig(rate_method="smpl_prd", output_rate_hz=100.0))

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from pipeline.adis16364 import REGISTERS, DeviceConfig, burst_counts, config_for_rate
-from pipeline.simulator import VirtualADIS16364
-from pipeline.spi import (
+from imupipe.device.adis16364 import REGISTERS, DeviceConfig, burst_counts, config_for_rate
+from imupipe.record.simulator import VirtualADIS16364
+from imupipe.record.spi import (
     Adis16364Driver,
     DeviceError,
     FakeSpiBus,

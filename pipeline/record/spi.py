@@ -5,7 +5,7 @@ Protocol (ADIS1636x datasheets; Linux ``adis16400`` driver): 16-bit frames, SPI 
 (CPOL = 1, CPHA = 1), MSB first.  A register read sends DIN = addr << 8 and the value comes back
 on the NEXT 16-bit frame; a write sends DIN = 0x8000 | addr << 8 | byte, one byte per frame, low
 address first; a burst read sends DIN = 0x3E00 and 11 more frames clock out SUPPLY_OUT..AUX_ADC
-(:data:`pipeline.adis16364.BURST_WORDS`).  Register reads toggle chip select between frames
+(:data:`imupipe.device.adis16364.BURST_WORDS`).  Register reads toggle chip select between frames
 (the driver issues one :meth:`SpiBus.xfer16` per frame); a burst keeps it low for all 12.
 """
 
@@ -18,7 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
-from pipeline.adis16364 import (
+from imupipe.device.adis16364 import (
     BURST_COMMAND,
     BURST_WORDS,
     PROD_ID_VALUE,
@@ -26,16 +26,12 @@ from pipeline.adis16364 import (
     DeviceConfig,
     FrameBlock,
 )
-from pipeline.errors import ImupipeError
-from pipeline.simulator import VirtualADIS16364
+from imupipe.errors import DeviceError
+from imupipe.record.simulator import VirtualADIS16364
 
 WRITE_BIT = 0x8000
 BURST_SPEED_HZ = 1_000_000
 """SCLK for burst reads (datasheet/Linux: bursts at <= 1 MHz)."""
-
-
-class DeviceError(ImupipeError):
-    """The SPI device is missing, is not an ADIS16364, or does not accept its configuration."""
 
 
 class SpiBus(Protocol):

@@ -1,5 +1,5 @@
 """Bulk CDR encoders for ``sensor_msgs/msg/Imu`` and ``sensor_msgs/msg/Temperature`` (tests and
-benchmarks: many messages at once with numpy, for :class:`pipeline.mcap_bulk.BulkWriter`).
+benchmarks: many messages at once with numpy, for :class:`imupipe.io.mcap_bulk.BulkWriter`).
 
 Layout (little-endian CDR, ROS 2 ``rosidl`` message definitions): 4-byte encapsulation, header
 stamp (sec i32, nanosec u32), frame_id (u32 length incl. NUL, "imu\\0"), then the float64

@@ -7,7 +7,7 @@ between raw 16-bit output words and physical values is vectorised over numpy arr
 whole chunk of frames is encoded or decoded at once.
 
 Units: gyro words are °/s per LSB, accelerometer words mg per LSB, temperature °C per LSB (0 LSB
-= 25 °C), supply volts per LSB.  SI conversion (rad/s, m/s²) happens in :mod:`pipeline.decode`.
+= 25 °C), supply volts per LSB.  SI conversion (rad/s, m/s²) happens in :mod:`imupipe.io.decode`.
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ from dataclasses import asdict, dataclass, fields
 
 import numba
 import numpy as np
+
+from imupipe.errors import ConfigError
 
 PROD_ID_VALUE = 16364
 """What PROD_ID (0x56) reads on an ADIS16364."""
@@ -127,7 +129,7 @@ def gyro_scale_dps(sens_avg: int) -> float:
     """Gyro scale factor (°/s per LSB) selected by SENS_AVG[10:8]."""
     code = (sens_avg >> 8) & 0x7
     if code not in GYRO_RANGES_DPS:
-        raise ValueError(f"SENS_AVG 0x{sens_avg:04X} selects no valid gyro range")
+        raise ConfigError(f"SENS_AVG 0x{sens_avg:04X} selects no valid gyro range")
     return GYRO_RANGES_DPS[code][1]
 
 
@@ -302,7 +304,7 @@ def config_for_rate(
     819.2 SPS stream with sample-and-hold.
     """
     if output_rate_hz <= 0:
-        raise ValueError(f"output rate must be positive, got {output_rate_hz}")
+        raise ConfigError(f"output rate must be positive, got {output_rate_hz}")
     for ns in range(128):
         if abs(sample_rate_sps(ns) / output_rate_hz - 1) < 1e-4:
             return DeviceConfig(
@@ -313,7 +315,7 @@ def config_for_rate(
                 source=source,
             )
     if output_rate_hz > sample_rate_sps(0x0001):
-        raise ValueError(
+        raise ConfigError(
             f"{output_rate_hz} Hz is faster than the sensor's {sample_rate_sps(1):.1f} SPS output"
         )
     return DeviceConfig(

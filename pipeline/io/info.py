@@ -1,7 +1,7 @@
 """``imupipe info``: what a recording holds, read by the same tolerant scan the analyser uses.
 
 Damage (a lost chunk with its estimated message count and log-time span, a cut tail, no footer)
-is worded by :meth:`pipeline.mcap_scan.ScanReport.damage`, the same sentences ``analyze`` puts in
+is worded by :meth:`imupipe.io.mcap_scan.ScanReport.damage`, the same sentences ``analyze`` puts in
 ``report.json``.
 """
 
@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.decode import IMU_SCHEMA, mcap_files
-from pipeline.frame_schema import SCHEMA_NAME
-from pipeline.mcap_scan import McapScanner, ScanReport
+from imupipe.device.frame_schema import SCHEMA_NAME
+from imupipe.io.decode import IMU_SCHEMA, mcap_files
+from imupipe.io.mcap_scan import McapScanner, ScanReport
 
 
 @dataclass

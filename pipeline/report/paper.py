@@ -8,14 +8,15 @@ paper's; it rounds the datasheet's 2.0 °/√h ARW to 0.03 °/√s and its 0.12 
 
 One correction of units: the paper prints the accelerometer bias ("average of data") in "mg", but
 its Z value of -0.9986 "including gravity" can only be in g (gravity is 1 g), so the three bias
-values are stored here in g (X: 0.0273 g = 27.3 mg) and converted by :mod:`pipeline.units`.
+values are stored here in g (X: 0.0273 g = 27.3 mg) and converted by :mod:`imupipe.units`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from pipeline.units import to_si
+from imupipe.units import to_si
+from imupipe.vocab import ACCEL_AXES, GYRO_AXES
 
 PAPER_SOURCE = (
     "F. Adamčik, ADIS16364 Allan variance error analysis, §4 table 'Results for ADIS16364' "
@@ -29,7 +30,7 @@ class PaperValue:
     """One row of the paper's results table for one axis.
 
     ``measured`` and ``datasheet`` are in ``unit`` (the paper's unit, a key of
-    :data:`pipeline.units.SI_PER_UNIT`); ``None`` where the paper gives no value.
+    :data:`imupipe.units.SI_PER_UNIT`); ``None`` where the paper gives no value.
     """
 
     measured: float | None
@@ -49,25 +50,22 @@ def _rows(unit: str, measured: tuple, datasheet: float | None, axes: tuple[str, 
     return {axis: PaperValue(m, datasheet, unit) for axis, m in zip(axes, measured, strict=True)}
 
 
-_GYROS = ("gyro_x", "gyro_y", "gyro_z")
-_ACCELS = ("accel_x", "accel_y", "accel_z")
-
 PAPER_TABLE: dict[str, dict[str, PaperValue]] = {
     "random_walk": {
-        **_rows("°/√s", (0.05, 0.05, 0.05), 0.03, _GYROS),
-        **_rows("mg/√s", (0.29, 0.27, 0.28), 0.2, _ACCELS),
+        **_rows("°/√s", (0.05, 0.05, 0.05), 0.03, GYRO_AXES),
+        **_rows("mg/√s", (0.29, 0.27, 0.28), 0.2, ACCEL_AXES),
     },
     "bias_instability": {
-        **_rows("°/s", (0.008, 0.008, 0.008), 0.007, _GYROS),
-        **_rows("mg", (0.107, 0.161, 0.135), 0.1, _ACCELS),
+        **_rows("°/s", (0.008, 0.008, 0.008), 0.007, GYRO_AXES),
+        **_rows("mg", (0.107, 0.161, 0.135), 0.1, ACCEL_AXES),
     },
     "mean": {
-        **_rows("°/s", (0.331, -0.104, -0.099), None, _GYROS),
-        **_rows("g", (0.0273, -0.0211, -0.9986), None, _ACCELS),
+        **_rows("°/s", (0.331, -0.104, -0.099), None, GYRO_AXES),
+        **_rows("g", (0.0273, -0.0211, -0.9986), None, ACCEL_AXES),
     },
     "rms": {
-        **_rows("°/s", (0.52, 0.51, 0.52), 0.8, _GYROS),
-        **_rows("mg", (3.0, 2.8, 2.9), 5.0, _ACCELS),
+        **_rows("°/s", (0.52, 0.51, 0.52), 0.8, GYRO_AXES),
+        **_rows("mg", (3.0, 2.8, 2.9), 5.0, ACCEL_AXES),
     },
 }
 """``PAPER_TABLE[quantity][axis]``: quantity is ``random_walk`` (N), ``bias_instability`` (B),

@@ -28,13 +28,15 @@ import polars as pl
 import rerun as rr
 import rerun.blueprint as rrb
 
-from pipeline.report import format_table
-from pipeline.results import AnalysisResult, AxisResult
+from imupipe.analysis.results import AnalysisResult, AxisResult
+from imupipe.errors import ViewerError
+from imupipe.report.report import format_table
+from imupipe.vocab import ACCEL_AXES, GYRO_AXES
 
 TIMELINE = "sensor_time"
 SIGNAL_GROUPS: dict[str, tuple[str, ...]] = {
-    "gyro": ("gyro_x", "gyro_y", "gyro_z"),
-    "accel": ("accel_x", "accel_y", "accel_z"),
+    "gyro": GYRO_AXES,
+    "accel": ACCEL_AXES,
     "housekeeping": ("temp_c", "supply_v"),
 }
 """One entity per group: its columns are sent as one batch of scalars per row, so a group shares
@@ -111,7 +113,7 @@ def _strip(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def _model_adev(axis: AxisResult) -> np.ndarray:
-    """Fitted IEEE 952 composite model sigma(tau) (:meth:`pipeline.ieee952.NoiseTerms.avar`)."""
+    """Fitted IEEE 952 composite model σ(τ) (:meth:`imupipe.model.ieee952.NoiseTerms.avar`)."""
     return np.sqrt(np.maximum(axis.terms.avar(axis.curve.tau_s), 0.0))
 
 
@@ -308,7 +310,7 @@ def rerun_executable() -> str:
     local = Path(sys.executable).with_name("rerun")
     found = str(local) if local.exists() else shutil.which("rerun")
     if found is None:
-        raise FileNotFoundError("the rerun executable was not found (pip install rerun-sdk)")
+        raise ViewerError("the rerun executable was not found (pip install rerun-sdk)")
     return found
 
 
@@ -318,5 +320,5 @@ def open_viewer(path: Path) -> None:
     if path.is_dir():
         path = path / "recording.rrd"
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no Rerun recording")
+        raise ViewerError(f"{path}: no Rerun recording")
     subprocess.run([rerun_executable(), str(path)], check=True)

@@ -1,10 +1,10 @@
 """``imupipe analyze``: run the stages in order, from MCAP bytes to reports.
 
-decode (:mod:`pipeline.decode`) → condition (:mod:`pipeline.condition`) → Allan deviation with
-confidence intervals (:mod:`pipeline.allan`) → IEEE 952 noise terms (:mod:`pipeline.ieee952`) →
-closed loop (:mod:`pipeline.loop`) → reports (:mod:`pipeline.report`) and Rerun
-(:mod:`pipeline.rerun_view`).  Each stage's output is the next one's input; nothing else is
-shared.
+decode (:mod:`imupipe.io.decode`) → condition (:mod:`imupipe.analysis.condition`) → Allan
+deviation with confidence intervals (:mod:`imupipe.stats.allan`) → IEEE 952 noise terms
+(:mod:`imupipe.model.ieee952`) → closed loop (:mod:`imupipe.model.loop`) → reports
+(:mod:`imupipe.report.report`) and Rerun (:mod:`imupipe.report.rerun_view`).  Each stage's
+output is the next one's input; nothing else is shared.
 """
 
 from __future__ import annotations
@@ -16,21 +16,23 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import polars as pl
 
-from pipeline.allan import AllanCurve, allan_curves, tau_factors
-from pipeline.condition import ConditionedSeries, condition
-from pipeline.decode import ImuRecording, decode, mcap_files
-from pipeline.errors import TooFewFramesError
-from pipeline.ieee952 import fit_noise_terms
-from pipeline.loop import AxisSignals, aux_block_means, close_loop
-from pipeline.progress import StageProgress
-from pipeline.results import AXES, AnalysisResult, AxisResult, InputSummary, sensor_of
+from imupipe.analysis.condition import ConditionedSeries, condition
+from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
+from imupipe.errors import TooFewFramesError
+from imupipe.io.decode import ImuRecording, decode, mcap_files
+from imupipe.model.ieee952 import fit_noise_terms
+from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
+from imupipe.progress import StageProgress
+from imupipe.stats.allan import AllanCurve, allan_curves, tau_factors
+from imupipe.vocab import AXES, sensor_of
 
 if TYPE_CHECKING:
-    from pipeline.rerun_view import RrdWriter
+    from imupipe.report.rerun_view import RrdWriter
 
 MEMORY_BUDGET_BYTES = 2_000_000_000
 """Recordings whose whole-frame analysis would need more (estimated with
-:data:`pipeline.lowmem.PEAK_BYTES_PER_FRAME`) take the pass-wise path of :mod:`pipeline.lowmem`."""
+:data:`imupipe.analysis.lowmem.PEAK_BYTES_PER_FRAME`) take the pass-wise path of
+:mod:`imupipe.analysis.lowmem`."""
 
 MIN_FRAMES = 16
 """Fewer frames than this cannot give even the shortest averaging times with any confidence."""
@@ -79,7 +81,7 @@ def axis_result(
 ) -> AxisResult:
     """Stage 4 (+ loop) of one axis: mean, rms, IEEE 952 terms and the closed loop
     (``temp_d``, ``supply_d``: the segment's temperature and supply as
-    :func:`pipeline.loop.aux_block_means`)."""
+    :func:`imupipe.model.loop.aux_block_means`)."""
     sensor = sensor_of(name)
     return AxisResult(
         name=name,
@@ -149,10 +151,10 @@ def analyze(
     The Rerun recording's raw signals are sent as soon as the segment is known, so that Rerun
     encodes them while the Allan deviation and the loop are computed.  A recording whose
     estimated peak exceeds ``options.memory_budget_bytes`` is analysed pass by pass instead
-    (:func:`pipeline.lowmem.analyze_low_memory`), with the same results.
+    (:func:`imupipe.analysis.lowmem.analyze_low_memory`), with the same results.
     """
-    from pipeline.lowmem import analyze_low_memory, peak_estimate
-    from pipeline.rerun_view import RrdWriter
+    from imupipe.analysis.lowmem import analyze_low_memory, peak_estimate
+    from imupipe.report.rerun_view import RrdWriter
 
     files = mcap_files(Path(path))
     if peak_estimate(files) > options.memory_budget_bytes:
@@ -181,7 +183,7 @@ def write_outputs(
     rrd: RrdWriter | None,
 ) -> None:
     """report.json/.md, figures, allan.parquet, imu.yaml, and the rrd's analysis views."""
-    from pipeline.report import write_report
+    from imupipe.report.report import write_report
 
     with progress.stage("report", 2 if rrd else 1, "files") as advance:
         write_report(result, out_dir, figures=options.figures)

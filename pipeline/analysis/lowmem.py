@@ -1,14 +1,14 @@
 """Pass-wise analysis of recordings too large to decode whole (e.g. 24 h at 1 kHz, 86.4 M frames).
 
-The normal path (:func:`pipeline.analyze.analyze`) decodes one frame of every column (~85 bytes a
-frame) and peaks near :data:`PEAK_BYTES_PER_FRAME`.  Here the file is read several times, each
-pass decoding only what one step needs (:func:`pipeline.decode.decode` with ``columns``):
+The normal path (:func:`imupipe.analysis.analyze.analyze`) decodes one frame of every column
+(~85 bytes a frame) and peaks near :data:`PEAK_BYTES_PER_FRAME`.  Here the file is read several
+times, each pass decoding only what one step needs (:func:`imupipe.io.decode.decode`, ``columns``):
 
 1. conditioning: ``t_s``, counter, flags and a 1-byte ``nonfinite`` flag per frame →
-   :func:`pipeline.condition.condition` chooses the segment, exactly as on the whole frame;
+   :func:`imupipe.analysis.condition.condition` chooses the segment, exactly as on the whole frame;
 2. temperature and supply, cut to the segment (the loop's regressors);
 3. one pass per axis: that axis' float64 column, cut to the segment → Allan deviation, IEEE 952
-   terms and the loop (:func:`pipeline.analyze.axis_result`) → freed before the next axis.
+   terms and the loop (:func:`imupipe.analysis.analyze.axis_result`) → freed before the next axis.
 
 The numbers equal the normal path's (same functions on the same float64 samples); only
 ``recording.rrd`` differs: its raw signals are a min/max envelope of :data:`ENVELOPE_BINS`
@@ -27,9 +27,7 @@ import numpy as np
 import polars as pl
 from mcap.reader import make_reader
 
-from pipeline import robust
-from pipeline.allan import allan_curves, tau_factors
-from pipeline.analyze import (
+from imupipe.analysis.analyze import (
     AnalyzeOptions,
     axis_result,
     check_frames,
@@ -37,13 +35,16 @@ from pipeline.analyze import (
     input_summary,
     write_outputs,
 )
-from pipeline.condition import Segment, condition, is_stuck, stuck_warning
-from pipeline.decode import decode, mcap_files
-from pipeline.edf import b1_noise_id
-from pipeline.effects import psd_line, spike_candidate
-from pipeline.loop import aux_block_means
-from pipeline.progress import StageProgress
-from pipeline.results import AXES, AnalysisResult, AxisResult
+from imupipe.analysis.condition import Segment, condition, is_stuck, stuck_warning
+from imupipe.analysis.results import AnalysisResult, AxisResult
+from imupipe.io.decode import decode, mcap_files
+from imupipe.model.effects import psd_line, spike_candidate
+from imupipe.model.loop import aux_block_means
+from imupipe.progress import StageProgress
+from imupipe.stats import robust
+from imupipe.stats.allan import allan_curves, tau_factors
+from imupipe.stats.edf import b1_noise_id
+from imupipe.vocab import AXES
 
 PEAK_BYTES_PER_FRAME = 210
 """Peak RSS of the normal path per decoded frame (measured: 12 h / 100 Hz, 4.32 M frames,
@@ -132,7 +133,7 @@ def _load_kernels(loop: bool) -> None:
     resident under the data (24 h / 1 kHz, cold cache: peak 2.02 GB against 1.81 GB warm);
     a child's memory leaves with it.  Loading from the cache costs this process little.  If the
     child fails (e.g. a read-only cache), the kernels are compiled here as before."""
-    code = f"from pipeline.lowmem import compile_kernels; compile_kernels({loop})"
+    code = f"from imupipe.analysis.lowmem import compile_kernels; compile_kernels({loop})"
     subprocess.run([sys.executable, "-c", code], capture_output=True, check=False)
     compile_kernels(loop)
 
@@ -150,8 +151,8 @@ def analyze_low_memory(
     options: AnalyzeOptions,
     progress: StageProgress,
 ) -> AnalysisResult:
-    """:func:`pipeline.analyze.analyze` in 2 + 6 decoding passes (module docstring)."""
-    from pipeline.rerun_view import RrdWriter
+    """:func:`imupipe.analysis.analyze.analyze` in 2 + 6 decoding passes (module docstring)."""
+    from imupipe.report.rerun_view import RrdWriter
 
     path = Path(path)
     size = sum(f.stat().st_size for f in mcap_files(path))

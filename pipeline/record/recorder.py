@@ -1,7 +1,7 @@
 """Record frames from a source (the virtual ADIS16364 or a real one on SPI) into an MCAP file.
 
-A source delivers :class:`~pipeline.adis16364.FrameBlock` s; each block becomes one zstd chunk
-written by :class:`~pipeline.mcap_bulk.BulkWriter` and flushed at once.  When recording in real
+A source delivers :class:`~imupipe.device.adis16364.FrameBlock` s; each block becomes one zstd chunk
+written by :class:`~imupipe.io.mcap_bulk.BulkWriter` and flushed at once.  When recording in real
 time a chunk holds about one second of frames, so a recorder killed with SIGKILL loses at most
 that second; SIGINT/SIGTERM stop after the current chunk and finish the file (summary, footer).
 A full disk (or a file-size limit) stops the recording with an error; the chunks written so far
@@ -20,9 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO, Protocol
 
-from pipeline.adis16364 import DeviceConfig, FrameBlock
-from pipeline.errors import ImupipeError
-from pipeline.frame_schema import (
+from imupipe.device.adis16364 import DeviceConfig, FrameBlock
+from imupipe.device.frame_schema import (
     DEFAULT_TOPIC,
     MESSAGE_ENCODING,
     METADATA_NAME,
@@ -32,7 +31,8 @@ from pipeline.frame_schema import (
     encode_frames,
     message_definition,
 )
-from pipeline.mcap_bulk import BulkWriter
+from imupipe.errors import ImupipeError
+from imupipe.io.mcap_bulk import BulkWriter
 
 FAST_CHUNK_FRAMES = 16384
 """Frames per chunk when simulating faster than real time (~1 MB uncompressed)."""
@@ -52,12 +52,17 @@ _NO_ROOM = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)
 
 @dataclass(frozen=True)
 class RecordSummary:
-    """What was recorded; ``stop_signal`` is the signal that ended it early (None if complete)."""
+    """What was recorded: ``frames`` of the ``requested``, at ``rate_hz`` (Hz) made by
+    ``rate_method`` (the sensor's SMPL_PRD divider or host polling); ``stop_signal`` is the
+    signal that ended it early (None if complete)."""
 
     path: Path
     frames: int
+    requested: int
     chunks: int
     duration_s: float
+    rate_hz: float
+    rate_method: str
     stop_signal: int | None = None
 
 
@@ -186,7 +191,9 @@ def record(
     finally:
         with contextlib.suppress(OSError):
             stream.close()
-    return RecordSummary(path, written, chunks, written / rate, stop_signal)
+    return RecordSummary(
+        path, written, n_frames, chunks, written / rate, rate, config.rate_method, stop_signal
+    )
 
 
 def write_truth(path: Path, truth: dict) -> None:

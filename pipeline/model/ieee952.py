@@ -43,15 +43,11 @@ import numba
 import numpy as np
 from scipy import optimize, special
 
-if TYPE_CHECKING:
-    from pipeline.allan import AllanCurve
+from imupipe.vocab import TERM_NAMES, TERM_UNITS, chi2_ppf_1dof
 
-TERM_NAMES = ("quantization", "random_walk", "bias_instability", "rate_random_walk", "rate_ramp")
-UNITS = {
-    "gyro": ("rad", "rad/s/sqrt(Hz)", "rad/s", "rad/s^2/sqrt(Hz)", "rad/s^2"),
-    "accel": ("m/s", "m/s^2/sqrt(Hz)", "m/s^2", "m/s^3/sqrt(Hz)", "m/s^3"),
-}
-CHI2_95 = float(2 * special.gammaincinv(0.5, 0.95))  # scipy.stats.chi2.ppf(0.95, 1)
+if TYPE_CHECKING:
+    from imupipe.stats.allan import AllanCurve
+
 _PLATEAU = 2.0 * np.log(2.0) / np.pi
 
 
@@ -386,7 +382,7 @@ class CompositeFit:
         idx = self.fit_index
         x, a, nu = self.design[idx], avar[idx], edf[idx]
         others = np.delete(x, j, axis=1)
-        limit = self.dispersion * float(2 * special.gammaincinv(0.5, level))  # chi2.ppf
+        limit = self.dispersion * chi2_ppf_1dof(level)
 
         def excess(c: float) -> float:
             return fit_nonneg_gamma(others, a, nu, c * x[:, j])[1] - self.deviance - limit
@@ -487,7 +483,7 @@ def _start_fit(
 ) -> tuple[CompositeFit, str]:
     """:func:`fit_start`, returning the fit from the chosen τ (= ``fit_composite`` with that
     ``tau_min``) instead of only its first τ."""
-    limit = float(2 * special.gammaincinv(0.5, level))  # scipy.stats.chi2.ppf(level, 1)
+    limit = chi2_ppf_1dof(level)
     idx = octave_index(tau)
     fit = fit_composite(tau, avar, edf, extra, prefilter=prefilter)
     for s in range(len(idx) - 1):
@@ -590,7 +586,7 @@ def terms_from_fit(
     tau_lo, tau_hi = fit.tau_range
     misfit = _adequacy(fit)
     terms, prefilter = {}, 0.0
-    for j, (name, unit) in enumerate(zip(TERM_NAMES, UNITS[sensor], strict=True)):
+    for j, (name, unit) in enumerate(zip(TERM_NAMES, TERM_UNITS[sensor], strict=True)):
         lo, hi = fit.profile_interval(avar, edf, j)
         if j == 0 and fit.short_sign < 0:
             prefilter = float(3.0 * fit.coef[0])

@@ -3,7 +3,7 @@
 The format is documented in README.md ("Scenario files").  Values are in the units of the ADIS16364
 paper: gyro axes in °/s (random walk °/√s, rate random walk °/s/√s), accelerometer axes in mg
 (mg/√s, mg/s/√s), time in s, temperature in °C, supply in V.  :meth:`Scenario.truth_dict` states
-everything in those units and in SI (:mod:`pipeline.units`).
+everything in those units and in SI (:mod:`imupipe.units`).
 
 Defaults are the paper's measured table (12 h static at 100 Hz, 21 °C; section 4): random walk
 0.05 °/√s per gyro and 0.29/0.27/0.28 mg/√s per accelerometer, bias instability 0.008 °/s and
@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ImupipeError
-from pipeline.noise import FLICKER_PLATEAU
-from pipeline.results import AXES, sensor_of
-from pipeline.units import PAPER_UNIT, SI_PER_UNIT, SI_UNIT
+from imupipe.errors import ScenarioError
+from imupipe.record.noise import FLICKER_PLATEAU
+from imupipe.units import PAPER_UNIT, SI_PER_UNIT, SI_UNIT
+from imupipe.vocab import AXES, sensor_of
 
 RRW_CROSSOVER_S = 6 * 3600.0
 """τ at which the default rate random walk meets the flicker plateau (s)."""
@@ -42,10 +42,6 @@ _PAPER_MEASURED = {
     "accel_y": (-21.1, 0.27, 0.161),
     "accel_z": (-998.6, 0.28, 0.135),
 }
-
-
-class ScenarioError(ImupipeError):
-    """A scenario file that cannot be used, with the offending key."""
 
 
 def unit_of(axis: str) -> str:

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.adis16364 import (
+from imupipe.device.adis16364 import (
     ACCEL_MG_PER_LSB,
     BURST_WORDS,
     DIAG_OVER_RANGE,
@@ -65,14 +65,16 @@ from pipeline.adis16364 import (
     encode_words,
     sample_rate_sps,
 )
-from pipeline.noise import (
+from imupipe.errors import ConfigError
+from imupipe.record.noise import (
     FlickerNoise,
     GaussMarkov,
     NormalStream,
     RateRandomWalk,
     keyed_rng,
 )
-from pipeline.scenario import AXES, Scenario
+from imupipe.record.scenario import Scenario
+from imupipe.vocab import AXES
 
 SUPPLY_HIGH_V = 5.25
 SUPPLY_LOW_V = 4.75
@@ -157,7 +159,7 @@ class VirtualADIS16364:
         if config.rate_method == "smpl_prd":
             f_int = config.internal_rate_sps
             if abs(config.output_rate_hz - f_int) > 1e-4 * f_int:
-                raise ValueError(
+                raise ConfigError(
                     f"rate_method 'smpl_prd' needs output_rate_hz = {f_int} for "
                     f"SMPL_PRD 0x{config.smpl_prd:04X}, got {config.output_rate_hz}"
                 )
@@ -327,7 +329,7 @@ class VirtualADIS16364:
         }
         truth["seed"] = self.seed
         truth["start_time_ns"] = self.start_time_ns
-        truth["simulator"] = "pipeline.simulator.VirtualADIS16364"
+        truth["simulator"] = "imupipe.record.simulator.VirtualADIS16364"
         return truth
 
     # ---- register level -------------------------------------------------------------------

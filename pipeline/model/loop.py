@@ -1,9 +1,9 @@
 """The closed loop of issue 4: fit the IEEE 952 model, read its residual, trace and add effects.
 
-Per axis: fit the composite AVAR model (:mod:`pipeline.ieee952`), compute normalised residuals
+Per axis: fit the composite AVAR model (:mod:`imupipe.model.ieee952`), compute normalised residuals
 and the goodness of fit (error = gamma deviance / dof on the octave-spaced τ of the fitted
 range, p-value calibrated by parametric bootstrap), then try every candidate of
-:mod:`pipeline.effects`.  A candidate is accepted only when (1) it is significant — AVAR terms
+:mod:`imupipe.model.effects`.  A candidate is accepted only when (1) it is significant — AVAR terms
 (sinusoid, Gauss–Markov): ΔBIC = ΔD/φ − Δk·ln(n_τ) ≥ 10, and a sinusoid's periodogram line
 stands out of its band's noise (:func:`effects.psd_line`, p below :data:`ALPHA`: on a long
 record a sliver of misfit passes ΔBIC, but only a real line passes this); time-domain corrections
@@ -38,15 +38,15 @@ from typing import Literal
 import numpy as np
 from scipy import special
 
-from pipeline import effects, ieee952
-from pipeline.allan import AllanCurve, SparseCorrection, allan_curves, oadev
+from imupipe.model import effects, ieee952
+from imupipe.stats.allan import AllanCurve, SparseCorrection, allan_curves, oadev
+from imupipe.vocab import CHI2_95
 
 DELTA_BIC = 10.0  # AVAR-term candidates
 ALPHA = 1e-3  # family-wise level of each time-domain candidate (Bonferroni over options)
 N_SEGMENTS = 16  # interleaved hold-out segments for time-domain corrections
 MAX_ROUNDS = 4
 N_BOOT = 200
-CHI2_95 = effects.CHI2_95  # rise of the AVAR deviance a time-domain correction may cause
 
 
 def block_size(n: int, tau0: float) -> int:

@@ -20,8 +20,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from pipeline.ieee952 import TERM_NAMES, design_columns
-from pipeline.results import AnalysisResult, AxisResult
+from imupipe.analysis.results import AnalysisResult, AxisResult
+from imupipe.model.ieee952 import design_columns
+from imupipe.vocab import TERM_NAMES
 
 _SYMBOLS = {
     "quantization": "Q",
@@ -77,7 +78,7 @@ def allan_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None
         _errorbar(ax, axis, color=color, label=f"{axis.name} ({conf:.1%} interval)")
         tau = np.asarray(axis.curve.tau_s, dtype=float)
         tau = np.geomspace(tau[0], tau[-1], 200)
-        # each term's own AVAR contribution (IEEE 952 Annex C, as fitted by pipeline.ieee952)
+        # each term's own AVAR contribution (IEEE 952 Annex C, as fitted by imupipe.model.ieee952)
         columns = design_columns(tau, getattr(axis.terms, "cutoff_hz", np.inf))
         for j, name in enumerate(TERM_NAMES):
             value, symbol = getattr(axis.terms, name).value, _SYMBOLS[name]

@@ -30,11 +30,11 @@ import numpy as np
 import scipy.fft
 from scipy import special
 
-from pipeline import robust
-from pipeline.allan import NO_CORRECTION, SparseCorrection
+from imupipe.stats import robust
+from imupipe.stats.allan import NO_CORRECTION, SparseCorrection
+from imupipe.vocab import CHI2_95
 
 Z95 = float(special.ndtri(0.975))  # scipy.stats.norm.ppf, without importing scipy.stats
-CHI2_95 = float(2 * special.gammaincinv(0.5, 0.95))  # scipy.stats.chi2.ppf(0.95, 1)
 LAGS_S = (0.0, 60.0, 300.0)  # auxiliary channel leading the rate (s)
 PSD_MAX_SAMPLES = 1 << 24  # longest series of the periodogram line search (psd_line)
 LOWPASS_BLOCKS = 31  # moving average of ADIS TEMP/SUPPLY (coarsely quantised) in blocks
@@ -435,7 +435,7 @@ def spike_candidate(y: np.ndarray, tau0: float) -> Candidate | None:
     """Samples beyond a robust z threshold with a family-wise false-alarm rate of 1e-3 (Gaussian).
 
     Scale from the median absolute deviation of first differences (insensitive to slow drift;
-    :mod:`pipeline.robust`, no copy of the series).  The correction replaces each spike by the
+    :mod:`imupipe.stats.robust`, no copy of the series).  The correction replaces each spike by the
     series' median.
     """
     y = np.ascontiguousarray(y)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.adis16364 import FrameBlock
+from imupipe.device.adis16364 import FrameBlock
 
 SCHEMA_NAME = "imupipe_msgs/msg/Adis16364Frame"
 SCHEMA_ENCODING = "ros2msg"
@@ -27,7 +27,7 @@ MESSAGE_ENCODING = "cdr"
 PROFILE = "ros2"
 DEFAULT_TOPIC = "/imu/adis16364/frame"
 METADATA_NAME = "adis16364"
-"""Name of the MCAP metadata record holding :class:`pipeline.adis16364.DeviceConfig`."""
+"""Name of the MCAP metadata record holding :class:`imupipe.device.adis16364.DeviceConfig`."""
 
 CDR_LE_HEADER = b"\x00\x01\x00\x00"
 
@@ -47,10 +47,10 @@ TAIL_SIZE = 4 + 12 * 2 + 1
 
 
 def schema_file(name: str) -> Traversable:
-    """A file of ``schemas/``: installed as the package ``pipeline.schemas``; in a source checkout
-    (``python -m pipeline`` run from the repository root) the folder beside the package."""
+    """A file of ``schemas/``: installed as the package ``imupipe.schemas``; in a source checkout
+    (``python -m imupipe`` run from the repository root) the folder beside the package."""
     try:
-        return importlib.resources.files("pipeline.schemas").joinpath(name)
+        return importlib.resources.files("imupipe.schemas").joinpath(name)
     except ModuleNotFoundError:
         return Path(__file__).resolve().parents[1] / "schemas" / name
 

@@ -34,7 +34,7 @@ from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
-from pipeline.errors import InputError
+from imupipe.errors import InputError, NotMcapError
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = 9  # opcode u8 + length u64
@@ -47,10 +47,6 @@ CRC-checked on a worker thread meanwhile (zstd, lz4 and crc32 release the GIL)."
 _PARSED = (Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA)
 _MALFORMED = (McapError, UnicodeDecodeError, struct.error, ValueError, OverflowError)
 """What the mcap library's record parsers raise on bytes that are not a valid record."""
-
-
-class NotMcapError(InputError):
-    """The file does not start with the MCAP magic."""
 
 
 @dataclass(frozen=True)
@@ -188,7 +184,7 @@ def _decompress(chunk: Chunk) -> bytes:
         return lz4.frame.decompress(chunk.data)
     if chunk.compression == "":
         return chunk.data
-    raise ValueError(f"unsupported compression {chunk.compression!r}")
+    raise InputError(f"unsupported compression {chunk.compression!r}")
 
 
 def _unpack(body: bytes) -> tuple[Chunk, bytes, str]:

@@ -4,11 +4,11 @@ Two kinds of IMU channel are understood:
 
 * ``imupipe_msgs/msg/Adis16364Frame`` (our recorder): raw burst words → physical units with the
   scale factors of the file's ``adis16364`` metadata record (14-/12-bit sign handling and the
-  ND/EA flags in :mod:`pipeline.adis16364`);
+  ND/EA flags in :mod:`imupipe.device.adis16364`);
 * ``sensor_msgs/msg/Imu`` from any ROS 2 driver, with ``sensor_msgs/msg/Temperature`` on a
   sibling topic used as the temperature channel when present.
 
-Messages are decoded in runs (see :mod:`pipeline.mcap_scan`): the fields after the header are
+Messages are decoded in runs (see :mod:`imupipe.io.mcap_scan`): the fields after the header are
 read at fixed offsets from the end of each CDR payload, so any ``frame_id`` length works.
 
 Output contract (:class:`ImuRecording`): ``frames`` has one row per message, sorted as recorded,
@@ -30,12 +30,12 @@ import numpy as np
 import polars as pl
 from mcap.records import Channel, Schema
 
-from pipeline import adis16364 as adis
-from pipeline.errors import InputError
-from pipeline.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
-from pipeline.mcap_scan import McapScanner, MessageRun
-from pipeline.results import AXES
-from pipeline.units import RAD_PER_DEG, STANDARD_GRAVITY
+from imupipe.device import adis16364 as adis
+from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
+from imupipe.errors import InputError
+from imupipe.io.mcap_scan import McapScanner, MessageRun
+from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
+from imupipe.vocab import AXES
 
 IMU_SCHEMA = "sensor_msgs/msg/Imu"
 TEMPERATURE_SCHEMA = "sensor_msgs/msg/Temperature"
@@ -429,7 +429,7 @@ def decode(
 
     ``columns`` restricts the frame to those contract columns, plus ``nonfinite`` (bool: any
     axis NaN/inf) if named, so that a recording too large for memory can be decoded in passes
-    of a few columns each (:mod:`pipeline.lowmem`); None gives the whole contract.
+    of a few columns each (:mod:`imupipe.analysis.lowmem`); None gives the whole contract.
     ``keep_one_time_base``: for ``t_s``, keep only the header stamps while reading (both bases'
     monotonicity is counted on the way) and read the file again for the log time in the rare
     case the stamps are unset or broken — one int64 column less at the peak.

@@ -2,7 +2,7 @@
 
 ``report.json`` (SI, the issue 3 contract plus the issue 4 loop additions, schema in
 ``schemas/report.schema.json``), ``report.md`` (the paper's table side by side with ours, in the
-paper's units, embedding the PNG figures of :mod:`pipeline.figures`), ``imu.yaml`` (Kalibr IMU
+paper's units, embedding the PNG figures of :mod:`imupipe.report.figures`), ``imu.yaml`` (Kalibr IMU
 noise model) and ``allan.parquet`` (the Allan curves in long form).
 """
 
@@ -11,27 +11,21 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterable
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
-import polars as pl
 
-from pipeline import __version__
-from pipeline.paper import DATASHEET_RANDOM_WALK, DATASHEET_SOURCE, PAPER_SOURCE, PAPER_TABLE
-from pipeline.results import AnalysisResult, AxisResult
-from pipeline.units import PAPER_UNIT, from_si
-
-SCHEMA_VERSION = 1
-TERM_NAMES: tuple[str, ...] = (
-    "quantization",
-    "random_walk",
-    "bias_instability",
-    "rate_random_walk",
-    "rate_ramp",
+from imupipe.analysis.results import (
+    ERROR_MEASURE,
+    AnalysisResult,
+    AxisResult,
+    allan_frame,
+    jsonable,
+    report_json,
 )
-ERROR_MEASURE = "gamma deviance per degree of freedom of the Allan-variance model fit"
-"""What ``error_before``/``error_after`` are (issue 4; lower is better)."""
+from imupipe.report.paper import DATASHEET_RANDOM_WALK, DATASHEET_SOURCE, PAPER_SOURCE, PAPER_TABLE
+from imupipe.units import PAPER_UNIT, from_si
+from imupipe.vocab import TERM_NAMES
 
 _PAPER_QUANTITIES: tuple[tuple[str, str], ...] = (
     ("random_walk", "Random walk N"),
@@ -44,69 +38,6 @@ _OTHER_TERMS: tuple[tuple[str, str], ...] = (
     ("rate_random_walk", "Rate random walk K"),
     ("rate_ramp", "Rate ramp R"),
 )
-
-
-def jsonable(obj: object) -> object:
-    """``obj`` with numpy scalars/arrays turned into Python values and non-finite floats into
-    ``None`` (JSON has no NaN), recursively through dicts, lists and tuples."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, list | tuple):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return jsonable(obj.item())
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    return obj
-
-
-def _axis_json(axis: AxisResult) -> dict:
-    curve = axis.curve
-    out: dict = {
-        "sensor": axis.sensor,
-        "unit": axis.unit,
-        "mean": axis.mean,
-        "rms": axis.rms,
-        "allan": {
-            "tau_s": curve.tau_s,
-            "adev": curve.adev,
-            "adev_lo": curve.adev_lo,
-            "adev_hi": curve.adev_hi,
-            "edf": curve.edf,
-            "n_terms": curve.n_terms,
-            "alpha": curve.alpha,
-            "confidence": curve.confidence,
-        },
-        "ieee952": axis.terms.as_dict(),
-        "ieee952_fit": axis.terms.fit_summary(),
-    }
-    loop = axis.loop
-    if loop is not None:
-        out["allan"]["adev_after"] = loop.adev_after
-        out["allan"]["model_adev_before"] = loop.model_adev_before
-        out["allan"]["model_adev_after"] = loop.model_adev_after
-        out["residual"] = {"z_before": loop.z_before, "z_after": loop.z_after}
-        out["model"] = loop.as_model_dict()
-        out["effects"] = loop.as_effects()
-        out["candidates"] = loop.as_candidates()
-        out["ieee952_after"] = loop.terms_after.as_dict()
-    return out
-
-
-def report_json(result: AnalysisResult) -> dict:
-    """The ``report.json`` document (SI units; every term carries its unit)."""
-    return jsonable(
-        {
-            "schema_version": SCHEMA_VERSION,
-            "generator": {"name": "imupipe", "version": __version__},
-            "error_measure": ERROR_MEASURE,
-            "input": asdict(result.input),
-            "device": dict(result.device),
-            "axes": {name: _axis_json(axis) for name, axis in result.axes.items()},
-        }
-    )
 
 
 def _fmt(value: float | None) -> str:
@@ -133,7 +64,7 @@ def _term_cell(axis: AxisResult, name: str) -> tuple[str, str]:
 
 def paper_rows(result: AnalysisResult) -> list[tuple[str, str, str, str, str, str]]:
     """Rows (quantity, axis, measured [interval], paper measured, datasheet, unit) comparing our
-    values with the paper's table, in the paper's units (see :mod:`pipeline.paper`)."""
+    values with the paper's table, in the paper's units (see :mod:`imupipe.report.paper`)."""
     rows = []
     for name, label in _PAPER_QUANTITIES:
         for axis in result.axes.values():
@@ -277,37 +208,6 @@ def kalibr_yaml(result: AnalysisResult) -> str:
     return "\n".join(lines) + "\n"
 
 
-def allan_frame(result: AnalysisResult) -> pl.DataFrame:
-    """The Allan curves in long form: axis, tau (s), adev, lo, hi (axis unit), edf, terms (number
-    of overlapping differences averaged), alpha (noise type), and, after the loop, the measured
-    deviation after its time-domain corrections, the model deviations before/after and the
-    normalised residuals."""
-    frames = []
-    for axis in result.axes.values():
-        c = axis.curve
-        n = len(c.tau_s)
-        cols = {
-            "axis": [axis.name] * n,
-            "unit": [axis.unit] * n,
-            "tau": np.asarray(c.tau_s, dtype=np.float64),
-            "adev": np.asarray(c.adev, dtype=np.float64),
-            "lo": np.asarray(c.adev_lo, dtype=np.float64),
-            "hi": np.asarray(c.adev_hi, dtype=np.float64),
-            "edf": np.asarray(c.edf, dtype=np.float64),
-            "terms": np.asarray(c.n_terms, dtype=np.int64),
-            "alpha": np.asarray(c.alpha, dtype=np.float64),
-        }
-        nan = np.full(n, np.nan)
-        loop = axis.loop
-        cols["adev_after"] = nan if loop is None else np.asarray(loop.adev_after, float)
-        cols["model_before"] = nan if loop is None else np.asarray(loop.model_adev_before, float)
-        cols["model_after"] = nan if loop is None else np.asarray(loop.model_adev_after, float)
-        cols["z_before"] = nan if loop is None else np.asarray(loop.z_before, float)
-        cols["z_after"] = nan if loop is None else np.asarray(loop.z_after, float)
-        frames.append(pl.DataFrame(cols))
-    return pl.concat(frames) if frames else pl.DataFrame()
-
-
 def report_markdown(result: AnalysisResult, figures: dict[str, Path]) -> str:
     """``report.md``: input summary and warnings, the paper's table side by side with ours, the
     loop's before/after per axis, the figures, and the Kalibr file."""
@@ -423,7 +323,7 @@ def write_report(result: AnalysisResult, out_dir: Path, figures: bool = True) ->
     pngs = {}
     if figures:
         # imported here: matplotlib (~26 MB resident) stays out of the analysis' memory peak
-        from pipeline.figures import write_figures
+        from imupipe.report.figures import write_figures
 
         pngs = write_figures(result, out_dir)
     (out_dir / "report.md").write_text(report_markdown(result, pngs))

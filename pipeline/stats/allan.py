@@ -9,7 +9,7 @@ random walk, so the second differences do not lose digits to a large linear ramp
 for each (m, axis) is one fused, vectorised pass compiled by numba and spread over the cores:
 numpy would need three passes that write memory per m (measured 3-4x slower), and the phase is
 the only large allocation (bounded by :data:`PHASE_BUDGET_BYTES`).
-Intervals: :mod:`pipeline.edf`.
+Intervals: :mod:`imupipe.stats.edf`.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from pipeline.edf import chi2_interval, edf_oadev, noise_ids
+from imupipe.stats.edf import chi2_interval, edf_oadev, noise_ids
 
 PHASE_BUDGET_BYTES = 64 << 20
 """Phase memory for axes processed together; longer records are processed axis by axis.  Axis
@@ -224,8 +224,8 @@ def allan_curves(
     """Overlapping ADEV with Stable32-style intervals for each axis of ``y`` (see :data:`Rates`).
 
     ``m`` defaults to :func:`tau_factors`; ``correction`` (one axis only) is subtracted from
-    y.  Per tau: noise type by :func:`pipeline.edf.noise_ids`, edf by
-    :func:`pipeline.edf.edf_oadev`, interval by :func:`pipeline.edf.chi2_interval` at
+    y.  Per tau: noise type by :func:`imupipe.stats.edf.noise_ids`, edf by
+    :func:`imupipe.stats.edf.edf_oadev`, interval by :func:`imupipe.stats.edf.chi2_interval` at
     ``confidence`` (0.683, Stable32's default).
     """
     cols = _columns(y)

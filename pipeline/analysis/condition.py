@@ -19,10 +19,10 @@ from typing import Literal
 import numpy as np
 import polars as pl
 
-from pipeline import robust
-from pipeline.decode import ImuRecording
-from pipeline.errors import ImupipeError
-from pipeline.results import AXES
+from imupipe.errors import ImupipeError
+from imupipe.io.decode import ImuRecording
+from imupipe.stats import robust
+from imupipe.vocab import AXES
 
 GAP_FACTOR = 1.5
 """With steady stamps, a step longer than this many nominal periods is a gap."""
@@ -164,7 +164,7 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
     period = 1.0 / rate
     warnings = list(rec.warnings)
 
-    if "nonfinite" in df.columns:  # a frame decoded without its axes (pipeline.lowmem)
+    if "nonfinite" in df.columns:  # a frame decoded without its axes (imupipe.analysis.lowmem)
         nonfinite = df["nonfinite"].to_numpy()
     else:
         nonfinite = np.zeros(n, dtype=bool)

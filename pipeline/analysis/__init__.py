@@ -1,0 +1,2 @@
+"""One recording analysed: conditioning (:mod:`.condition`), the orchestrator
+(:mod:`.analyze`) and the result contract (:mod:`.results`)."""

@@ -1,0 +1,2 @@
+"""What a user takes away: report.json/.md and imu.yaml (:mod:`.report`), figures
+(:mod:`.figures`), the Rerun recording (:mod:`.rerun_view`), the paper's values (:mod:`.paper`)."""

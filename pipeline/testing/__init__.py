@@ -1,0 +1,1 @@
+"""Fakes and bulk encoders used by the tests and benchmarks only (never by the pipeline)."""
