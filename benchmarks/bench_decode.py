@@ -21,8 +21,8 @@ from mcap.reader import make_reader
 
 from imupipe.device.adis16364 import config_for_rate
 from imupipe.io.decode import decode
-from imupipe.record.recorder import record
-from imupipe.record.simulator import VirtualADIS16364
+from imupipe.recording.recorder import record
+from imupipe.recording.simulator import VirtualADIS16364
 
 
 def iter_messages(path: Path) -> int:

@@ -27,8 +27,8 @@ from imupipe.device.frame_schema import (
     encode_frames,
     message_definition,
 )
-from imupipe.record.recorder import record
-from imupipe.record.simulator import VirtualADIS16364
+from imupipe.recording.recorder import record
+from imupipe.recording.simulator import VirtualADIS16364
 
 
 def bare_loop(path: Path, payloads: list[bytes], stamps: list[int]) -> float:

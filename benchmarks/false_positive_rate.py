@@ -27,9 +27,10 @@ from imupipe.device.adis16364 import (
     burst_counts,
 )
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
-from imupipe.record.scenario import AXES, Scenario, Temperature, sensor_of, si_per_unit
-from imupipe.record.simulator import VirtualADIS16364
+from imupipe.recording.scenario import Scenario, Temperature, si_per_unit
+from imupipe.recording.simulator import VirtualADIS16364
 from imupipe.stats.allan import allan_curves
+from imupipe.vocab import AXES, sensor_of
 
 LAB_TEMPERATURE = Temperature(
     points=((0.0, 21.0), (1800.0, 23.5), (5400.0, 24.0), (10800.0, 23.6), (43200.0, 24.2)),

@@ -19,13 +19,13 @@ if TYPE_CHECKING:
     from imupipe.analysis.results import AnalysisResult
     from imupipe.api import analyze, record
     from imupipe.errors import ImupipeError
-    from imupipe.record.recorder import RecordSummary
+    from imupipe.recording.recorder import RecordSummary
 
 _LAZY = {
     "analyze": "imupipe.api",
     "record": "imupipe.api",
     "AnalysisResult": "imupipe.analysis.results",
-    "RecordSummary": "imupipe.record.recorder",
+    "RecordSummary": "imupipe.recording.recorder",
     "ImupipeError": "imupipe.errors",
 }
 

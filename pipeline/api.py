@@ -20,8 +20,8 @@ from imupipe.analysis.analyze import analyze as _run_analysis
 from imupipe.analysis.results import AnalysisResult
 from imupipe.errors import ImupipeError
 from imupipe.progress import StageProgress
-from imupipe.record.recorder import RecordSummary, parse_duration, write_truth
-from imupipe.record.recorder import record as _run_recorder
+from imupipe.recording.recorder import RecordSummary, parse_duration, write_truth
+from imupipe.recording.recorder import record as _run_recorder
 
 _ANALYZE_OPTIONS = frozenset(f.name for f in fields(AnalyzeOptions))
 
@@ -98,8 +98,8 @@ def record(
     seconds = parse_duration(str(duration))
     config = config_for_rate(rate_hz, source=source, serial_number=serial)
     if source == "sim":
-        from imupipe.record.scenario import load_scenario
-        from imupipe.record.simulator import VirtualADIS16364
+        from imupipe.recording.scenario import load_scenario
+        from imupipe.recording.simulator import VirtualADIS16364
 
         frame_source = VirtualADIS16364(
             config, load_scenario(Path(scenario)) if scenario else None, seed=seed
@@ -107,7 +107,7 @@ def record(
     elif source == "spi":
         if scenario or truth:
             raise ImupipeError("--scenario and --truth apply to the simulator only (--source sim)")
-        from imupipe.record.spi import open_spi_source
+        from imupipe.recording.spi import open_spi_source
 
         frame_source = open_spi_source(device, config)
     else:

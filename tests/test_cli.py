@@ -16,8 +16,8 @@ import pytest
 from imupipe.cli import main
 from imupipe.device.adis16364 import FrameBlock, config_for_rate
 from imupipe.io.mcap_bulk import BulkWriter
-from imupipe.record.recorder import FrameWriter
-from imupipe.record.simulator import VirtualADIS16364
+from imupipe.recording.recorder import FrameWriter
+from imupipe.recording.simulator import VirtualADIS16364
 
 CONFIG = config_for_rate(100.0)
 

@@ -9,9 +9,9 @@ import polars as pl
 import pytest
 
 from imupipe.analysis.condition import condition
-from imupipe.analysis.results import AXES
 from imupipe.errors import ImupipeError
 from imupipe.io.decode import ImuRecording
+from imupipe.vocab import AXES
 
 
 def recording(n: int = 1000, rate: float = 100.0, seed: int = 0, **edits) -> ImuRecording:

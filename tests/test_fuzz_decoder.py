@@ -33,7 +33,7 @@ from imupipe.device.frame_schema import (
 from imupipe.errors import ImupipeError
 from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, decode
 from imupipe.io.info import describe
-from imupipe.record.recorder import FrameWriter
+from imupipe.recording.recorder import FrameWriter
 
 EXAMPLES = 50
 FUZZ = settings(

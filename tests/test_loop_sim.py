@@ -24,7 +24,7 @@ from imupipe.device.adis16364 import (
 )
 from imupipe.model.effects import CHI2_95, gauss_markov_avar
 from imupipe.model.loop import AxisSignals, LoopResult, aux_block_means, close_loop
-from imupipe.record.scenario import (
+from imupipe.recording.scenario import (
     AXES,
     BiasStep,
     Drift,
@@ -37,7 +37,7 @@ from imupipe.record.scenario import (
     sensor_of,
     si_per_unit,
 )
-from imupipe.record.simulator import VirtualADIS16364
+from imupipe.recording.simulator import VirtualADIS16364
 from imupipe.stats.allan import allan_curves
 
 HOURS, RATE_HZ = 3.0, 10.0

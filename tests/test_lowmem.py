@@ -21,8 +21,8 @@ from imupipe.device.adis16364 import config_for_rate
 from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA
 from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.progress import StageProgress
-from imupipe.record.recorder import FrameWriter
-from imupipe.record.simulator import VirtualADIS16364
+from imupipe.recording.recorder import FrameWriter
+from imupipe.recording.simulator import VirtualADIS16364
 from imupipe.testing.ros_cdr import imu_payloads, temperature_payloads
 
 N = 24_000  # 100 Hz, 4 min

@@ -24,7 +24,7 @@ from imupipe.errors import InputError
 from imupipe.io.decode import decode
 from imupipe.io.info import describe
 from imupipe.io.mcap_scan import NotMcapError
-from imupipe.record.recorder import FrameWriter
+from imupipe.recording.recorder import FrameWriter
 
 T0 = 1_700_000_000_000_000_000
 

@@ -35,8 +35,8 @@ from imupipe.device.frame_schema import (
     message_definition,
 )
 from imupipe.io.mcap_bulk import BulkWriter
-from imupipe.record.recorder import FrameWriter
-from imupipe.record.simulator import VirtualADIS16364
+from imupipe.recording.recorder import FrameWriter
+from imupipe.recording.simulator import VirtualADIS16364
 from imupipe.testing.ros_cdr import imu_payloads
 
 RATE_HZ = 100.0

@@ -10,9 +10,9 @@ import pytest
 from imupipe.analysis.analyze import AnalyzeOptions, analyze
 from imupipe.device.adis16364 import config_for_rate
 from imupipe.progress import StageProgress
-from imupipe.record.recorder import record
-from imupipe.record.scenario import load_scenario
-from imupipe.record.simulator import VirtualADIS16364
+from imupipe.recording.recorder import record
+from imupipe.recording.scenario import load_scenario
+from imupipe.recording.simulator import VirtualADIS16364
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_logs"
 

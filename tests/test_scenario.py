@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imupipe.record.scenario import (
+from imupipe.recording.scenario import (
     RRW_CROSSOVER_S,
     Scenario,
     ScenarioError,

@@ -17,15 +17,16 @@ from imupipe.device.adis16364 import (
     config_for_rate,
 )
 from imupipe.errors import ConfigError
-from imupipe.record.noise import (
+from imupipe.recording.noise import (
     FLICKER_PLATEAU,
     FlickerNoise,
     GaussMarkov,
     NormalStream,
     RateRandomWalk,
 )
-from imupipe.record.scenario import AXES, BiasStep, Scenario, Sinusoid, Spikes, Supply, Temperature
-from imupipe.record.simulator import VirtualADIS16364, bartlett_response, white_gain
+from imupipe.recording.scenario import BiasStep, Scenario, Sinusoid, Spikes, Supply, Temperature
+from imupipe.recording.simulator import VirtualADIS16364, bartlett_response, white_gain
+from imupipe.vocab import AXES
 
 PAPER_N = {"gyro_x": 0.05, "gyro_y": 0.05, "gyro_z": 0.05,
            "accel_x": 0.29, "accel_y": 0.27, "accel_z": 0.28}  # fmt: skip

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from imupipe.device.adis16364 import REGISTERS, DeviceConfig, burst_counts, config_for_rate
-from imupipe.record.simulator import VirtualADIS16364
-from imupipe.record.spi import (
+from imupipe.recording.simulator import VirtualADIS16364
+from imupipe.recording.spi import (
     Adis16364Driver,
     DeviceError,
     FakeSpiBus,

@@ -1,2 +1,17 @@
 """One recording analysed: conditioning (:mod:`.condition`), the orchestrator
 (:mod:`.analyze`) and the result contract (:mod:`.results`)."""
+
+from imupipe.analysis.analyze import AnalyzeOptions, analyze
+from imupipe.analysis.condition import ConditionedSeries, condition
+from imupipe.analysis.results import ALLAN_SCHEMA, AnalysisResult, AxisResult, InputSummary
+
+__all__ = [
+    "ALLAN_SCHEMA",
+    "AnalysisResult",
+    "AnalyzeOptions",
+    "AxisResult",
+    "ConditionedSeries",
+    "InputSummary",
+    "analyze",
+    "condition",
+]

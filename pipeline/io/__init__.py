@@ -1,3 +1,21 @@
 """Bytes in and out: the MCAP scanner (:mod:`.mcap_scan`) and bulk writer (:mod:`.mcap_bulk`),
 the decoders of ADIS16364 frames and ROS 2 ``sensor_msgs/msg/Imu`` into a polars frame
 (:mod:`.decode`), rosbag2 directories, and ``imupipe info`` (:mod:`.info`)."""
+
+from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, ImuRecording, decode, mcap_files
+from imupipe.io.info import describe, imu_topics
+from imupipe.io.mcap_bulk import BulkWriter
+from imupipe.io.mcap_scan import McapScanner, ScanReport
+
+__all__ = [
+    "IMU_SCHEMA",
+    "TEMPERATURE_SCHEMA",
+    "BulkWriter",
+    "ImuRecording",
+    "McapScanner",
+    "ScanReport",
+    "decode",
+    "describe",
+    "imu_topics",
+    "mcap_files",
+]

@@ -27,7 +27,7 @@ from imupipe.device.adis16364 import (
     FrameBlock,
 )
 from imupipe.errors import DeviceError
-from imupipe.record.simulator import VirtualADIS16364
+from imupipe.recording.simulator import VirtualADIS16364
 
 WRITE_BIT = 0x8000
 BURST_SPEED_HZ = 1_000_000

@@ -66,14 +66,14 @@ from imupipe.device.adis16364 import (
     sample_rate_sps,
 )
 from imupipe.errors import ConfigError
-from imupipe.record.noise import (
+from imupipe.recording.noise import (
     FlickerNoise,
     GaussMarkov,
     NormalStream,
     RateRandomWalk,
     keyed_rng,
 )
-from imupipe.record.scenario import Scenario
+from imupipe.recording.scenario import Scenario
 from imupipe.vocab import AXES
 
 SUPPLY_HIGH_V = 5.25
@@ -329,7 +329,7 @@ class VirtualADIS16364:
         }
         truth["seed"] = self.seed
         truth["start_time_ns"] = self.start_time_ns
-        truth["simulator"] = "imupipe.record.simulator.VirtualADIS16364"
+        truth["simulator"] = "imupipe.recording.simulator.VirtualADIS16364"
         return truth
 
     # ---- register level -------------------------------------------------------------------

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from imupipe.errors import ScenarioError
-from imupipe.record.noise import FLICKER_PLATEAU
+from imupipe.recording.noise import FLICKER_PLATEAU
 from imupipe.units import PAPER_UNIT, SI_PER_UNIT, SI_UNIT
 from imupipe.vocab import AXES, sensor_of
 
