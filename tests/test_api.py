@@ -60,3 +60,22 @@ def test_unknown_analyze_option_is_an_imupipe_error(tmp_path: Path) -> None:
 def test_record_refuses_truth_for_a_real_sensor(tmp_path: Path) -> None:
     with pytest.raises(ImupipeError, match="simulator only"):
         imupipe.record(tmp_path / "x.mcap", source="spi", truth=tmp_path / "t.json")
+
+
+SUBPACKAGES = ("device", "io", "recording", "stats", "model", "analysis", "report", "testing")
+
+
+@pytest.mark.parametrize("name", SUBPACKAGES)
+def test_subpackage_exports_resolve_and_shadow_no_module(name: str) -> None:
+    import importlib
+    import pkgutil
+
+    package = importlib.import_module(f"imupipe.{name}")
+    modules = {m.name for m in pkgutil.iter_modules(package.__path__)}
+    assert package.__all__, f"imupipe.{name} names no public API"
+    for public in package.__all__:
+        assert public not in modules, f"imupipe.{name}.{public} hides the module of that name"
+        assert getattr(package, public) is not None
+    for module in modules:  # a submodule stays reachable as an attribute after the imports
+        assert importlib.import_module(f"imupipe.{name}.{module}").__name__.endswith(module)
+        assert type(getattr(package, module)).__name__ == "module"

@@ -1,8 +1,8 @@
 """One recording analysed: conditioning (:mod:`.condition`), the orchestrator
 (:mod:`.analyze`) and the result contract (:mod:`.results`)."""
 
-from imupipe.analysis.analyze import AnalyzeOptions, analyze
-from imupipe.analysis.condition import ConditionedSeries, condition
+from imupipe.analysis.analyze import AnalyzeOptions
+from imupipe.analysis.condition import ConditionedSeries
 from imupipe.analysis.results import ALLAN_SCHEMA, AnalysisResult, AxisResult, InputSummary
 
 __all__ = [
@@ -12,6 +12,4 @@ __all__ = [
     "AxisResult",
     "ConditionedSeries",
     "InputSummary",
-    "analyze",
-    "condition",
 ]

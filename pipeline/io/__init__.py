@@ -2,7 +2,7 @@
 the decoders of ADIS16364 frames and ROS 2 ``sensor_msgs/msg/Imu`` into a polars frame
 (:mod:`.decode`), rosbag2 directories, and ``imupipe info`` (:mod:`.info`)."""
 
-from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, ImuRecording, decode, mcap_files
+from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, ImuRecording, mcap_files
 from imupipe.io.info import describe, imu_topics
 from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.io.mcap_scan import McapScanner, ScanReport
@@ -14,7 +14,6 @@ __all__ = [
     "ImuRecording",
     "McapScanner",
     "ScanReport",
-    "decode",
     "describe",
     "imu_topics",
     "mcap_files",
