@@ -200,3 +200,24 @@ def test_chunked_step_scan_equals_one_pass(monkeypatch, chunk) -> None:
     assert [(s.start, s.stop) for s in reference.segments] == [
         (0, 7), (7, 14), (14, 64), (64, 300), (300, 500), (500, 1000)
     ]  # fmt: skip
+
+
+@pytest.mark.parametrize("missing", [1, 3])
+def test_dropped_messages_without_a_frame_counter_are_a_gap(missing: int) -> None:
+    # a ROS Imu stream has no frame counter: the stamps alone must reveal the dropped messages
+    def drop(a):
+        a[500:] += missing * 10_000_000
+
+    rec = recording(stamp_ns=drop)
+    rec = ImuRecording(
+        rec.frames.with_columns(pl.lit(None, dtype=pl.UInt32).alias("counter")),
+        rec.path,
+        rec.topic,
+        "sensor_msgs/msg/Imu",
+        rec.time_source,
+        rec.device,
+    )
+    s = condition(rec)
+    assert [seg.frames for seg in s.segments] == [500, 500]
+    assert (s.counts["gaps"], s.counts["missed_frames"]) == (1, missing)
+    assert f"1 gap(s) in time or frame counter ({missing} frames missing)" in " ".join(s.warnings)

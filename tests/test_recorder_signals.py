@@ -62,22 +62,29 @@ def test_sigint_sigterm_finish_a_valid_file(tmp_path: Path, signum: int) -> None
     assert check.returncode == 0, check.stderr
 
 
-def test_sigkill_at_real_time_loses_at_most_a_second(tmp_path: Path) -> None:
+@pytest.mark.parametrize("rate_hz", [RATE_HZ, 10.0])
+def test_sigkill_at_real_time_loses_at_most_a_second(tmp_path: Path, rate_hz: float) -> None:
+    # at 10 Hz a second of frames is far smaller than any write buffer: only the flush after
+    # each chunk puts it on disk
     out = tmp_path / "f.mcap"
-    proc = start_recorder(out, "--duration", "1h", "--realtime")
+    proc = start_recorder(out, "--duration", "1h", "--realtime", "--rate", str(rate_hz))
     t_first = wait_for_first_chunk(out)
-    time.sleep(2.6)
+    sizes = []
+    for _ in range(2):  # each second's chunk reaches the file in its second
+        time.sleep(1.3)
+        sizes.append(out.stat().st_size)
     t_kill = time.monotonic()
     proc.kill()
     proc.wait(timeout=10)
     elapsed_s = t_kill - t_first
     rec = decode(out)  # no summary, no footer: the linear scan recovers every chunk
     assert any("no footer" in w for w in rec.warnings)
+    assert sizes[0] > 1500 and sizes[1] > sizes[0], f"file sizes {sizes}: chunks not flushed"
     frames = rec.frames.height
     print(f"SIGKILL after {elapsed_s:.2f} s of recording: {frames} frames recovered")
-    # The first chunk (100 frames) is written at t_first, then one chunk per second: every
-    # second of real time before the kill is in the file, except the one being collected.
-    assert frames >= (elapsed_s - 1.0) * RATE_HZ
+    # The first chunk (one second of frames) is written at t_first, then one chunk per second:
+    # every second of real time before the kill is in the file, except the one being collected.
+    assert frames >= (elapsed_s - 1.0) * rate_hz
     counters = rec.frames["counter"].to_numpy()
     assert (counters == range(frames)).all()
 
