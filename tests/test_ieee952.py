@@ -274,3 +274,29 @@ def test_fit_noise_terms_is_fit_start_then_fit_composite():
     tau_min, note = ieee952.fit_start(tau, avar, edf)
     fit = ieee952.fit_composite(tau, avar, edf, tau_min=tau_min, prefilter=True)
     assert terms == ieee952.terms_from_fit(fit, avar, edf, "gyro", note)
+
+
+CHI2_1DOF_95 = 3.841458820694124  # χ²₁ 95 % quantile (NIST/SEMATECH table: 3.841)
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_interval_ends_are_where_the_deviance_rises_by_chi2_95(seed: int) -> None:
+    """Each end of a resolved term's interval is where the profile deviance (the other terms
+    refitted) exceeds the best fit's by exactly φ·χ²₁(0.95): a 95 % likelihood-ratio interval,
+    not an ~83 % one (χ²₁(0.83) = 1.88)."""
+    rng = np.random.default_rng(seed)
+    tau0 = 0.01
+    y = synth_rate(400_000, tau0, rng, n_white=1e-3, b_flicker=2e-4, k_rrw=1e-5)
+    curve = allan_curves([y], tau0, tau_factors(len(y)))[0]
+    avar, edf = curve.adev**2, ieee952.monotone_edf(curve.edf)
+    fit = ieee952.fit_composite(curve.tau_s, avar, edf)
+    terms = ieee952.terms_from_fit(fit, avar, edf, "gyro")
+    idx = fit.fit_index
+    x, a, nu = fit.design[idx], avar[idx], edf[idx]
+    for j, name in ((1, "random_walk"), (2, "bias_instability")):
+        term = getattr(terms, name)
+        others = np.delete(x, j, axis=1)
+        for end in (term.lo, term.hi):
+            profile = ieee952.fit_nonneg_gamma(others, a, nu, end**2 * x[:, j])[1]
+            rise = (profile - fit.deviance) / fit.dispersion
+            assert rise == pytest.approx(CHI2_1DOF_95, rel=2e-3), (name, end)
