@@ -35,7 +35,10 @@ def test_clean_axis_accepts_nothing(seed):
     rng, y = base(seed)
     res = run(y, temperature(N, rng))
     assert res.as_effects() == []
-    assert res.after.error == res.before.error
+    # candidates were tried and each was turned down with its reason
+    assert {c["kind"] for c in res.as_candidates()} >= {"temperature", "bias_step"}
+    assert all(c["reason"] for c in res.as_candidates())
+    assert res.before.p_value > 0.01  # the baseline model is adequate on a clean axis
 
 
 def test_temperature_coupling_found_and_regressed_out():
