@@ -1,4 +1,4 @@
-"""Memory of :func:`imupipe.io.decode.decode` with a column subset (the low-memory path's passes).
+"""Memory of :func:`imupipe.io.decode.decode` with a column subset (only what a step needs).
 
 A 24 h / 1 kHz recording has 86.4 M frames: one float64 column is 691 MB, and the 2 GB budget
 of issue 5 leaves room for about two.  The peak of a decoding pass is measured in a fresh
