@@ -2,11 +2,12 @@
 
 Runs the analysis in this process with a thread sampling the resident set size
 (/proc/self/statm, every 10 ms, Linux) and labels the samples with the stage running: each
-progress-bar stage (decoding passes, "analyse <axis>", "report") and, inside them, the Allan
-curves, the IEEE 952 fit, the closed loop and its hold-out and spike steps.  Prints one line per
-stage entry/exit and the peak of each label; the last line is the kernel's high-water mark.
+progress-bar stage ("decode" or "decode + spill", "analyse", "report") and, inside them, the
+column source's hand-outs, the Allan curves, the IEEE 952 fit, the closed loop and its hold-out
+and spike steps.  Prints one line per stage entry/exit (elapsed wall time, RSS: the per-stage
+timings) and the peak of each label; the last line is the kernel's high-water mark.
 
-    python benchmarks/memory_profile.py /tmp/imupipe_scale.mcap            # low-memory path
+    python benchmarks/memory_profile.py /tmp/imupipe_scale.mcap            # spilled source
     python benchmarks/memory_profile.py FILE --memory-budget-gb 2         # as the CLI decides
 """
 
@@ -22,10 +23,11 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import imupipe.analysis.analyze as analyze_module
-import imupipe.analysis.lowmem as lowmem_module
 import imupipe.model.loop as loop_module
 from imupipe.analysis.analyze import AnalyzeOptions, analyze
+from imupipe.io.columns import InMemoryColumns, SpilledColumns
 from imupipe.progress import StageProgress
+from imupipe.report.outputs import ReportOutputs
 
 PAGE = resource.getpagesize()
 
@@ -69,7 +71,8 @@ class StageMemory:
         function: Callable = getattr(module, name)
 
         def labelled(*args, **kwargs):
-            with self.label(name):
+            what = args[1] if len(args) > 1 and isinstance(args[1], str) else ""  # a column
+            with self.label(f"{name} {what}".strip()):
                 return function(*args, **kwargs)
 
         setattr(module, name, labelled)
@@ -78,7 +81,7 @@ class StageMemory:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("file", type=Path)
-    ap.add_argument("--memory-budget-gb", type=float, default=0.0, help="0: low-memory path")
+    ap.add_argument("--memory-budget-gb", type=float, default=0.0, help="0: spilled source")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     memory = StageMemory()
@@ -90,7 +93,12 @@ def main() -> None:
             yield advance
 
     StageProgress.stage = labelled_stage
-    memory.wrap(lowmem_module, "allan_curves")
+    for source in (InMemoryColumns, SpilledColumns):
+        memory.wrap(source, "conditioning")
+        memory.wrap(source, "column")
+        memory.wrap(source, "signals")
+    memory.wrap(analyze_module, "condition")
+    memory.wrap(analyze_module, "allan_curves")
     memory.wrap(analyze_module, "fit_noise_terms")
     memory.wrap(analyze_module, "close_loop")
     memory.wrap(loop_module, "_holdout_column")
@@ -98,7 +106,7 @@ def main() -> None:
     out = args.out or Path(tempfile.mkdtemp(prefix="imupipe-memory-"))
     options = AnalyzeOptions(memory_budget_bytes=round(args.memory_budget_gb * 1e9))
     with StageProgress(quiet=True) as progress:
-        analyze(args.file, out, options, progress)
+        analyze(args.file, options, progress, ReportOutputs(out))
     print("peak RSS per label:")
     for name, peak in memory.peaks.items():
         print(f"  {name:28s} {peak / 1e9:.2f} GB")

@@ -46,7 +46,8 @@ def analyze(
         progress: show progress bars on a terminal.
         **options: fields of :class:`imupipe.analysis.analyze.AnalyzeOptions` (``topic``,
             ``taus_per_decade``, ``gaps``, ``loop``, ``rrd``, ``figures``,
-            ``memory_budget_bytes``).
+            ``memory_budget_bytes``, ``tmp_dir``: where a recording over the memory budget is
+            spilled, default the system's temporary directory).
 
     Returns:
         The :class:`AnalysisResult`: SI values per axis; ``to_dict()`` is ``report.json``,
@@ -59,9 +60,15 @@ def analyze(
     if unknown:
         known = sorted(_ANALYZE_OPTIONS)
         raise ImupipeError(f"unknown analyze option(s) {unknown}; known: {known}")
+    from imupipe.report.outputs import ReportOutputs
+
     out_dir = Path(out) if out is not None else default_out_dir(path)
+    if options.get("tmp_dir") is not None:
+        options["tmp_dir"] = Path(options["tmp_dir"])
+    analyze_options = AnalyzeOptions(**options)
+    outputs = ReportOutputs(out_dir, figures=analyze_options.figures)
     with StageProgress(quiet=not progress) as bars:
-        return _run_analysis(Path(path), out_dir, AnalyzeOptions(**options), bars)
+        return _run_analysis(Path(path), analyze_options, bars, outputs)
 
 
 def record(

@@ -133,9 +133,16 @@ def analyze(
         typer.Option(
             min=0.0,
             help="Recordings whose whole-frame analysis would need more memory are decoded "
-            "in passes (one axis at a time; same results).",
+            "once into a temporary on-disk store and analysed one axis at a time (same results).",
         ),
     ] = 2.0,
+    tmp_dir: Annotated[
+        Path | None,
+        typer.Option(
+            help="Where a recording over the memory budget is spilled while it is analysed "
+            "(~65 bytes a frame; default: the system's temporary directory; removed after).",
+        ),
+    ] = None,
     quiet: Quiet = False,
 ) -> None:
     """Analyse a recording: Allan deviation, IEEE 952 terms, effects; write reports."""
@@ -150,6 +157,7 @@ def analyze(
         loop=loop,
         rrd=rrd,
         memory_budget_bytes=round(memory_budget_gb * 1e9),
+        tmp_dir=tmp_dir,
     )
     if topic != ALL_TOPICS:
         _analyze_one(path, out_dir, options, quiet)

@@ -1,4 +1,4 @@
-"""Memory of :func:`imupipe.io.decode.decode` with a column subset (the low-memory path's passes).
+"""Memory of :func:`imupipe.io.decode.decode` with a column subset (only what a step needs).
 
 A 24 h / 1 kHz recording has 86.4 M frames: one float64 column is 691 MB, and the 2 GB budget
 of issue 5 leaves room for about two.  The peak of a decoding pass is measured in a fresh
@@ -65,7 +65,7 @@ import sys
 from pathlib import Path
 import polars as pl
 import imupipe.io.decode as dec
-from imupipe.analysis.lowmem import _release_freed_memory
+from imupipe.io.columns import release_freed_memory
 
 def status(key):
     with open("/proc/self/status") as f:
@@ -73,7 +73,7 @@ def status(key):
 
 dec._CHUNK = 1 << 16  # temporaries of 0.5 MB: the fixed costs stay small next to 24 MB columns
 pl.repeat(None, 1, dtype=pl.UInt32, eager=True)  # polars' first call commits ~9 MB (once)
-_release_freed_memory()  # as before each pass of imupipe.analysis.lowmem
+release_freed_memory()  # as the spilled column source does before building a column
 with open("/proc/self/clear_refs", "w") as f:
     f.write("5")  # VmHWM := VmRSS (proc(5), Linux >= 4.0)
 before = status("VmRSS:")

@@ -1,4 +1,5 @@
-"""The low-memory (pass-wise) path gives the normal path's numbers.
+"""The spilled column source (decoded once into a temporary on-disk store, analysed one axis
+at a time) gives the in-memory source's numbers.
 
 Forced with ``memory_budget_bytes=0`` on small recordings: an ADIS16364 recording from our
 recorder with a NaN frame (cut into segments), and a ROS ``sensor_msgs/msg/Imu`` bag with a
@@ -15,12 +16,12 @@ import numpy as np
 import polars as pl
 import pytest
 
-from imupipe.analysis.analyze import AnalyzeOptions, analyze
-from imupipe.analysis.lowmem import envelope, envelope_times, peak_estimate
+from imupipe.analysis.analyze import AnalyzeOptions
+from imupipe.api import analyze
 from imupipe.device.adis16364 import config_for_rate
+from imupipe.io.columns import envelope, envelope_times, peak_estimate
 from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA
 from imupipe.io.mcap_bulk import BulkWriter
-from imupipe.progress import StageProgress
 from imupipe.recording.recorder import FrameWriter
 from imupipe.recording.simulator import VirtualADIS16364
 from imupipe.testing.ros_cdr import imu_payloads, temperature_payloads
@@ -70,9 +71,8 @@ def imu_bag(path: Path) -> Path:
     return path
 
 
-def run(path: Path, out: Path, budget: int) -> tuple[dict, pl.DataFrame]:
-    options = AnalyzeOptions(rrd=False, figures=False, memory_budget_bytes=budget)
-    analyze(path, out, options, StageProgress(quiet=True))
+def run(path: Path, out: Path, budget: int, **options) -> tuple[dict, pl.DataFrame]:
+    analyze(path, out, rrd=False, figures=False, memory_budget_bytes=budget, **options)
     return json.loads((out / "report.json").read_text()), pl.read_parquet(out / "allan.parquet")
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -143,15 +144,18 @@ def synthetic_result(with_loop: bool = True) -> AnalysisResult:
             "error_after": 1.03,
             "evidence": {"coherence": 0.9},
         }
-        ax.loop = StandInLoop(
-            terms_before=ax.terms,
-            terms_after=ax.terms,
-            adev_after=ax.curve.adev * 0.97,
-            model_adev_before=ax.curve.adev * 0.9,
-            model_adev_after=ax.curve.adev,
-            z_before=z_before,
-            z_after=rng.normal(0, 1, ax.curve.tau_s.size),
-            effects=[effect],
+        axes["accel_x"] = dataclasses.replace(
+            ax,
+            loop=StandInLoop(
+                terms_before=ax.terms,
+                terms_after=ax.terms,
+                adev_after=ax.curve.adev * 0.97,
+                model_adev_before=ax.curve.adev * 0.9,
+                model_adev_after=ax.curve.adev,
+                z_before=z_before,
+                z_after=rng.normal(0, 1, ax.curve.tau_s.size),
+                effects=[effect],
+            ),
         )
     inp = InputSummary(
         path="run.mcap",

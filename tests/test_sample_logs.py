@@ -7,9 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from imupipe.analysis.analyze import AnalyzeOptions, analyze
+from imupipe.api import analyze
 from imupipe.device.adis16364 import config_for_rate
-from imupipe.progress import StageProgress
 from imupipe.recording.recorder import record
 from imupipe.recording.scenario import load_scenario
 from imupipe.recording.simulator import VirtualADIS16364
@@ -38,8 +37,8 @@ def test_default_sample_analyses_to_the_paper_random_walk(tmp_path: Path) -> Non
     result = analyze(
         SAMPLES / "adis16364_default_5min.mcap",
         tmp_path,
-        AnalyzeOptions(rrd=False, figures=False),
-        StageProgress(quiet=True),
+        rrd=False,
+        figures=False,
     )
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["input"]["frames"] == 30000
@@ -59,8 +58,8 @@ def test_lab_sample_loop_finds_the_temperature_effect(tmp_path: Path) -> None:
     analyze(
         SAMPLES / "lab_2h_10hz.mcap",
         tmp_path,
-        AnalyzeOptions(rrd=False, figures=False),
-        StageProgress(quiet=True),
+        rrd=False,
+        figures=False,
     )
     axes = json.loads((tmp_path / "report.json").read_text())["axes"]
     found = {name: [e["kind"] for e in axis["effects"]] for name, axis in axes.items()}

@@ -1,5 +1,5 @@
-"""One recording analysed: conditioning (:mod:`.condition`), the orchestrator
-(:mod:`.analyze`) and the result contract (:mod:`.results`)."""
+"""One recording analysed: conditioning (:mod:`.condition`), the one orchestrator of the
+stages for either column source (:mod:`.analyze`) and the result contract (:mod:`.results`)."""
 
 from imupipe.analysis.analyze import AnalyzeOptions
 from imupipe.analysis.condition import ConditionedSeries

@@ -1,38 +1,43 @@
-"""``imupipe analyze``: run the stages in order, from MCAP bytes to reports.
+"""``imupipe analyze``: the one orchestrator, running the stages in order once.
 
-decode (:mod:`imupipe.io.decode`) → condition (:mod:`imupipe.analysis.condition`) → Allan
-deviation with confidence intervals (:mod:`imupipe.stats.allan`) → IEEE 952 noise terms
-(:mod:`imupipe.model.ieee952`) → closed loop (:mod:`imupipe.model.loop`) → reports
-(:mod:`imupipe.report.report`) and Rerun (:mod:`imupipe.report.rerun_view`).  Each stage's
-output is the next one's input; nothing else is shared.
+column source (:mod:`imupipe.io.columns`: decode in memory, or decode once and spill to a
+temporary on-disk store when the recording would not fit the memory budget) → condition
+(:mod:`imupipe.analysis.condition`) → per axis: Allan deviation with confidence intervals
+(:mod:`imupipe.stats.allan`), IEEE 952 noise terms (:mod:`imupipe.model.ieee952`), closed loop
+(:mod:`imupipe.model.loop`) → outputs (an :class:`Outputs`, e.g.
+:class:`imupipe.report.outputs.ReportOutputs`: reports and Rerun).  Each stage's output is the
+next one's input, a new value; no stage changes what it was given.  The axes are handed out one
+at a time, whichever source, so the same code gives the same numbers on both.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import subprocess
+import sys
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import Literal, Protocol
 
 import numpy as np
 import polars as pl
 
-from imupipe.analysis.condition import ConditionedSeries, condition
+from imupipe.analysis.condition import ConditionedSeries, condition, is_stuck, stuck_warning
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.errors import TooFewFramesError
-from imupipe.io.decode import ImuRecording, decode, mcap_files
+from imupipe.io.columns import HOUSEKEEPING, ColumnSource, open_columns
+from imupipe.io.decode import ImuRecording
+from imupipe.model.effects import psd_line, spike_candidate
 from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
 from imupipe.progress import StageProgress
+from imupipe.stats import robust
 from imupipe.stats.allan import AllanCurve, allan_curves, tau_factors
+from imupipe.stats.edf import b1_noise_id
 from imupipe.vocab import AXES, sensor_of
 
-if TYPE_CHECKING:
-    from imupipe.report.rerun_view import RrdWriter
-
 MEMORY_BUDGET_BYTES = 2_000_000_000
-"""Recordings whose whole-frame analysis would need more (estimated with
-:data:`imupipe.analysis.lowmem.PEAK_BYTES_PER_FRAME`) take the pass-wise path of
-:mod:`imupipe.analysis.lowmem`."""
+"""Recordings whose in-memory analysis would need more (estimated by
+:func:`imupipe.io.columns.peak_estimate`) are read through the spilled column source."""
 
 MIN_FRAMES = 16
 """Fewer frames than this cannot give even the shortest averaging times with any confidence."""
@@ -47,19 +52,21 @@ class AnalyzeOptions:
     rrd: bool = True
     figures: bool = True
     memory_budget_bytes: int = MEMORY_BUDGET_BYTES
+    tmp_dir: Path | None = None
 
 
-def housekeeping(frames: pl.DataFrame, name: str) -> np.ndarray | None:
-    """A housekeeping column as numpy, nulls filled from the neighbours; None if all null.
+class Outputs(Protocol):
+    """Where the orchestrator's results go (the report stage implements it)."""
 
-    Without nulls it is a zero-copy view of the frame's column (a 12 h / 100 Hz column is
-    35 MB; the fill would copy it)."""
-    col = frames[name]
-    if col.null_count() == len(col):
-        return None
-    if col.null_count():
-        col = col.fill_null(strategy="forward").fill_null(strategy="backward")
-    return col.to_numpy()
+    def begin(self, signals: pl.DataFrame) -> None:
+        """The raw signals of the analysed segment are known (columns of
+        :data:`imupipe.io.columns.SIGNALS`); called before the axes are analysed."""
+
+    def finish(self, result: AnalysisResult, progress: StageProgress) -> None:
+        """The analysis is done: write everything."""
+
+    def discard(self) -> None:
+        """The analysis failed after :meth:`begin`: remove what was started."""
 
 
 def check_frames(rec: ImuRecording, n: int) -> None:
@@ -97,8 +104,11 @@ def axis_result(
     )
 
 
-def input_summary(rec: ImuRecording, series: ConditionedSeries, n: int) -> InputSummary:
-    """The report's ``input`` section for a segment of ``n`` frames."""
+def input_summary(
+    rec: ImuRecording, series: ConditionedSeries, warnings: list[str]
+) -> InputSummary:
+    """The report's ``input`` section for the chosen segment."""
+    n = series.segment.frames
     return InputSummary(
         path=str(rec.path),
         topic=rec.topic,
@@ -106,88 +116,103 @@ def input_summary(rec: ImuRecording, series: ConditionedSeries, n: int) -> Input
         rate_hz=series.rate_hz,
         duration_s=n * series.tau0_s,
         segments=[s.as_dict() for s in series.segments],
-        warnings=series.warnings,
+        warnings=warnings,
         source=rec.source,
         time_source=rec.time_source,
         counts=series.counts,
     )
 
 
-def analyze_series(
-    rec: ImuRecording,
+def analyze_axes(
+    source: ColumnSource,
     series: ConditionedSeries,
     options: AnalyzeOptions,
     progress: StageProgress,
-) -> AnalysisResult:
-    """Stages 3–4 (+ loop) on the conditioned segment of a recording."""
-    n = series.frames.height
-    check_frames(rec, n)
-    axes = [a for a in AXES if a not in series.stuck_axes]
-    y = [series.frames[a].to_numpy() for a in axes]  # zero-copy views of the frame's columns
-    m = tau_factors(n, per_decade=options.taus_per_decade)
-    with progress.stage("allan", len(axes), "axes") as advance:
-        curves = allan_curves(y, series.tau0_s, m)
-        advance(len(axes))
-    temp_d = aux_block_means(housekeeping(series.frames, "temp_c"), series.tau0_s)
-    supply_d = aux_block_means(housekeeping(series.frames, "supply_v"), series.tau0_s)
+) -> tuple[dict[str, AxisResult], list[str]]:
+    """Stages 3–4 (+ loop) on the chosen segment, one axis at a time; returns the results of
+    the analysed axes and the axes found stuck (constant: nothing to analyse)."""
+    rows, tau0 = series.rows, series.tau0_s
+    aux = {name: aux_block_means(source.column(name, rows), tau0) for name in HOUSEKEEPING}
+    m = tau_factors(series.segment.frames, per_decade=options.taus_per_decade)
     results: dict[str, AxisResult] = {}
-    with progress.stage("noise fit", len(axes), "axes") as advance:
-        for i, (name, curve) in enumerate(zip(axes, curves, strict=True)):
-            results[name] = axis_result(
-                name, y[i], curve, series.tau0_s, temp_d, supply_d, options.loop
-            )
+    stuck: list[str] = []
+    with progress.stage("analyse", len(AXES), "axes") as advance:
+        for i, name in enumerate(AXES):
+            y = source.column(name, rows)
+            assert y is not None  # axes are never null
+            if is_stuck(y):
+                stuck.append(name)
+            else:
+                curve = allan_curves([y], tau0, m)[0]
+                results[name] = axis_result(
+                    name, y, curve, tau0, aux["temp_c"], aux["supply_v"], options.loop
+                )
+            del y  # the spilled source's axis leaves before the next one comes
             advance(i + 1)
-    return AnalysisResult(input=input_summary(rec, series, n), axes=results, device=rec.device)
+    return results, stuck
 
 
 def analyze(
-    path: Path,
-    out_dir: Path,
-    options: AnalyzeOptions,
-    progress: StageProgress,
+    path: Path, options: AnalyzeOptions, progress: StageProgress, outputs: Outputs
 ) -> AnalysisResult:
-    """Decode ``path``, analyse it and write the reports into ``out_dir``.
+    """Analyse the recording at ``path`` and hand the result to ``outputs``.
 
-    The Rerun recording's raw signals are sent as soon as the segment is known, so that Rerun
-    encodes them while the Allan deviation and the loop are computed.  A recording whose
-    estimated peak exceeds ``options.memory_budget_bytes`` is analysed pass by pass instead
-    (:func:`imupipe.analysis.lowmem.analyze_low_memory`), with the same results.
+    The raw signals go to ``outputs.begin`` as soon as the segment is known (the Rerun
+    recording encodes them while the axes are analysed).  A recording whose estimated peak
+    exceeds ``options.memory_budget_bytes`` is read through the spilled column source, with
+    the same numbers; the report's warnings say so.
     """
-    from imupipe.analysis.lowmem import analyze_low_memory, peak_estimate
-    from imupipe.report.rerun_view import RrdWriter
-
-    files = mcap_files(Path(path))
-    if peak_estimate(files) > options.memory_budget_bytes:
-        return analyze_low_memory(path, out_dir, options, progress)
-    size = sum(f.stat().st_size for f in files)
-    with progress.stage("decode", size, "bytes") as advance:
-        rec = decode(path, topic=options.topic, progress=advance)
-    series = condition(rec, gaps=options.gaps)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    rrd = RrdWriter(out_dir / "recording.rrd", series.frames) if options.rrd else None
-    try:
-        result = analyze_series(rec, series, options, progress)
-    except BaseException:
-        if rrd:
-            rrd.discard()
-        raise
-    write_outputs(result, out_dir, options, progress, rrd)
+    with open_columns(
+        Path(path), options.topic, progress, options.memory_budget_bytes, options.tmp_dir
+    ) as source:
+        if source.spilled:
+            with progress.stage("compile", 1, "step"):
+                load_kernels(options.loop)
+        rec = source.conditioning()
+        series = condition(rec, gaps=options.gaps)
+        check_frames(rec, series.segment.frames)
+        if options.rrd:
+            outputs.begin(source.signals(rec.frames, series.rows))
+        about = replace(rec, frames=rec.frames.clear())
+        del rec  # the spilled source's conditioning columns (t_s: 691 MB at 24 h / 1 kHz)
+        try:
+            results, stuck = analyze_axes(source, series, options, progress)
+        except BaseException:
+            outputs.discard()
+            raise
+        warnings = [
+            *series.warnings,
+            *(stuck_warning(a) for a in stuck),
+            *source.notes(series.segment.frames, options.rrd),
+        ]
+    result = AnalysisResult(
+        input=input_summary(about, series, warnings), axes=results, device=about.device
+    )
+    outputs.finish(result, progress)
     return result
 
 
-def write_outputs(
-    result: AnalysisResult,
-    out_dir: Path,
-    options: AnalyzeOptions,
-    progress: StageProgress,
-    rrd: RrdWriter | None,
-) -> None:
-    """report.json/.md, figures, allan.parquet, imu.yaml, and the rrd's analysis views."""
-    from imupipe.report.report import write_report
+def compile_kernels(loop: bool = True) -> None:
+    """Compile the numba kernels (or load them from numba's disk cache) on a few thousand
+    synthetic samples: every kernel the analysis calls, with the types it calls them with."""
+    rng = np.random.default_rng(0)
+    white = rng.standard_normal(4096)
+    axis_result("gyro_x", white, allan_curves([white], 0.01)[0], 0.01, None, None, loop)
+    b1_noise_id(white, 100)  # white phase: the R(n) branch
+    psd_line(
+        white, 0.01, 10.0, 20.0, spike_candidate(white + 50.0 * (np.arange(4096) == 7), 0.01).spikes
+    )
+    robust.median_positive(np.cumsum(white), differences=True)
+    robust.mad(np.cumsum(white), differences=True)
 
-    with progress.stage("report", 2 if rrd else 1, "files") as advance:
-        write_report(result, out_dir, figures=options.figures)
-        advance(1)
-        if rrd:
-            rrd.finish(result)
-            advance(2)
+
+def load_kernels(loop: bool) -> None:
+    """Have the kernels compiled into numba's disk cache by a child process, then load them.
+
+    Compiling in this process on a first run after installing keeps ~0.2 GB of LLVM's memory
+    resident under the data (24 h / 1 kHz, cold cache: peak 2.02 GB against 1.81 GB warm);
+    a child's memory leaves with it.  Loading from the cache costs this process little.  If the
+    child fails (e.g. a read-only cache), the kernels are compiled here as before."""
+    code = f"from imupipe.analysis.analyze import compile_kernels; compile_kernels({loop})"
+    subprocess.run([sys.executable, "-c", code], capture_output=True, check=False)
+    compile_kernels(loop)

@@ -6,8 +6,9 @@ a non-increasing stamp, a non-finite or saturated sample — cuts the recording 
 segments, and hands the longest clean segment on (policy ``"longest"``), or refuses
 (policy ``"fail"``).  Everything it found is counted and stated as a warning.
 
-Contract: :class:`ConditionedSeries` — ``frames`` holds the chosen segment's rows (decode stage
-columns); ``tau0_s`` is the sampling interval estimated as the segment's mean stamp step.
+Contract: :class:`ConditionedSeries` — the segments found, the chosen one (rows of the decoded
+frame), ``tau0_s`` the sampling interval estimated as its mean stamp step, what was counted and
+the warnings.  The decoded frame is only read, never changed or kept.
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-import polars as pl
 
 from imupipe.errors import ImupipeError
 from imupipe.io.decode import ImuRecording
@@ -56,22 +56,30 @@ class Segment:
         }
 
 
-@dataclass
+@dataclass(frozen=True)
 class ConditionedSeries:
     """The segment to analyse and what conditioning found."""
 
-    frames: pl.DataFrame
     tau0_s: float
     nominal_rate_hz: float
-    segments: list[Segment]
+    segments: tuple[Segment, ...]
     chosen: int
     counts: dict[str, int] = field(default_factory=dict)
-    warnings: list[str] = field(default_factory=list)
-    stuck_axes: list[str] = field(default_factory=list)
+    warnings: tuple[str, ...] = ()
 
     @property
     def rate_hz(self) -> float:
         return 1.0 / self.tau0_s
+
+    @property
+    def segment(self) -> Segment:
+        """The chosen segment."""
+        return self.segments[self.chosen]
+
+    @property
+    def rows(self) -> slice:
+        """The chosen segment's rows of the decoded frame."""
+        return slice(self.segment.start, self.segment.stop)
 
 
 def is_stuck(y: np.ndarray) -> bool:
@@ -164,7 +172,7 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
     period = 1.0 / rate
     warnings = list(rec.warnings)
 
-    if "nonfinite" in df.columns:  # a frame decoded without its axes (imupipe.analysis.lowmem)
+    if "nonfinite" in df.columns:  # a frame decoded without its axes (imupipe.io.columns)
         nonfinite = df["nonfinite"].to_numpy()
     else:
         nonfinite = np.zeros(n, dtype=bool)
@@ -244,16 +252,11 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
                 "the measured rate is used"
             )
 
-    frames = df.slice(seg.start, seg.frames)
-    stuck = [a for a in AXES if a in frames.columns and is_stuck(frames[a].to_numpy())]
-    warnings.extend(stuck_warning(a) for a in stuck)
     return ConditionedSeries(
-        frames=frames,
         tau0_s=float(tau0),
         nominal_rate_hz=rate,
-        segments=segments,
+        segments=tuple(segments),
         chosen=chosen,
         counts=counts,
-        warnings=warnings,
-        stuck_axes=stuck,
+        warnings=tuple(warnings),
     )

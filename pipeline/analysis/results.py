@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from imupipe.stats.allan import AllanCurve
 
 
-@dataclass
+@dataclass(frozen=True)
 class AxisResult:
     """Everything measured on one axis.
 
@@ -42,7 +42,7 @@ class AxisResult:
     loop: LoopResult | None = None
 
 
-@dataclass
+@dataclass(frozen=True)
 class InputSummary:
     """What was analysed: file, topic, frame count, rate (Hz), duration (s) of the analysed data,
     the clean segments found (dicts from the condition stage), the warnings raised, the message
@@ -60,7 +60,7 @@ class InputSummary:
     counts: dict[str, int] = field(default_factory=dict)
 
 
-@dataclass
+@dataclass(frozen=True)
 class AnalysisResult:
     """The input summary, the per-axis results keyed by axis name, and device metadata."""
 

@@ -12,11 +12,17 @@ Messages are decoded in runs (see :mod:`imupipe.io.mcap_scan`): the fields after
 read at fixed offsets from the end of each CDR payload, so any ``frame_id`` length works.
 
 Output contract (:class:`ImuRecording`): ``frames`` has one row per message, sorted as recorded,
-with columns ``stamp_ns`` (i64, header stamp), ``gyro_x/y/z`` (rad/s), ``accel_x/y/z`` (m/s²),
-``temp_c`` (°C, null if absent), ``supply_v`` (V, null if absent), ``counter`` (u32, null for ROS),
-``flag_nd``, ``flag_ea``, ``saturated`` (bool), ``diag_stat`` (u16), ``t_s`` (f64, seconds since
-the first frame on the chosen time base, :attr:`ImuRecording.time_source`).  The MCAP log time
-only serves to choose the time base and is not kept (35 MB for 12 h at 100 Hz).
+with the columns of :data:`DECODED_SCHEMA`: ``stamp_ns`` (i64, header stamp), ``gyro_x/y/z``
+(rad/s), ``accel_x/y/z`` (m/s²), ``temp_c`` (°C, null if absent), ``supply_v`` (V, null if
+absent), ``counter`` (u32, null for ROS), ``flag_nd``, ``flag_ea``, ``saturated`` (bool),
+``diag_stat`` (u16), ``t_s`` (f64, seconds since the first frame on the chosen time base,
+:attr:`ImuRecording.time_source`).  The MCAP log time only serves to choose the time base and is
+not kept (35 MB for 12 h at 100 Hz).
+
+Reading and building are two steps: :func:`scan` reads the file once into the channel's raw
+columns (in memory, or appended to files in a spill directory), and
+:meth:`ScannedRecording.recording` builds the frame, or a subset of its columns, from them.
+:func:`decode` does both.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 import polars as pl
@@ -45,9 +52,27 @@ _IMU_GYRO = 8 * (4 + 9)  # offset of angular_velocity within the tail
 _IMU_ACCEL = 8 * (4 + 9 + 3 + 9)
 
 
-@dataclass
+DECODED_SCHEMA = pl.Schema(
+    {
+        "stamp_ns": pl.Int64,
+        **dict.fromkeys(AXES, pl.Float64),
+        "temp_c": pl.Float64,
+        "supply_v": pl.Float64,
+        "counter": pl.UInt32,
+        "flag_nd": pl.Boolean,
+        "flag_ea": pl.Boolean,
+        "saturated": pl.Boolean,
+        "diag_stat": pl.UInt16,
+        "t_s": pl.Float64,
+    }
+)
+"""The contract of :attr:`ImuRecording.frames` (whole decode; a ``columns`` subset has these
+columns' types, and ``nonfinite``, when asked for, is Boolean)."""
+
+
+@dataclass(frozen=True)
 class ImuRecording:
-    """The decoded IMU channel of one recording (see the module docstring for columns)."""
+    """The decoded IMU channel of one recording (columns: :data:`DECODED_SCHEMA`)."""
 
     frames: pl.DataFrame
     path: Path
@@ -136,6 +161,38 @@ class _Column:
         return out
 
 
+class _SpilledColumn:
+    """One decoded column appended run by run to a file: the bytes go to the page cache, not
+    to this process' memory, and :meth:`join` maps the file copy-on-write (writes made to the
+    map, e.g. ``t_s`` over the stamps' buffer, stay private to it) as often as it is asked."""
+
+    def __init__(self, file: Path) -> None:
+        self.file = file
+        self.sink: BinaryIO | None = None
+        self.dtype = np.dtype(np.float64)
+        self.row_shape: tuple[int, ...] = ()
+        self.rows = 0
+
+    def add(self, v: np.ndarray) -> None:
+        """Append the rows of ``v`` (same dtype and row shape on every call)."""
+        if self.sink is None:
+            self.sink = open(self.file, "wb")  # closed by seal()
+            self.dtype, self.row_shape = v.dtype, v.shape[1:]
+        self.sink.write(memoryview(np.ascontiguousarray(v)).cast("B"))
+        self.rows += len(v)
+
+    def seal(self) -> None:
+        """Close the file: no more rows."""
+        if self.sink is not None:
+            self.sink.close()
+
+    def join(self) -> np.ndarray:
+        """All rows, as a copy-on-write memory map of the file."""
+        if not self.rows:
+            return np.empty((0, *self.row_shape), self.dtype)
+        return np.memmap(self.file, self.dtype, "c", shape=(self.rows, *self.row_shape))
+
+
 class _Steps:
     """The non-increasing steps x[i + 1] <= x[i] of a series seen run by run, and whether any
     value is non-zero."""
@@ -157,24 +214,41 @@ _TIMES = ("stamp_ns", "log_time_ns")
 
 
 class _Columns:
-    """Accumulates decoded column arrays of one channel, run by run; the two candidate time
-    bases are also followed by :class:`_Steps`, and not kept when named in ``skip``."""
+    """Accumulates decoded column arrays of one channel, run by run, in memory or (``spill``,
+    a directory) in files; the two candidate time bases are also followed by :class:`_Steps`,
+    and not kept when named in ``skip``."""
 
-    def __init__(self, skip: frozenset[str] = frozenset()) -> None:
-        self.columns: dict[str, _Column] = defaultdict(_Column)
+    def __init__(self, skip: frozenset[str] = frozenset(), spill: Path | None = None) -> None:
+        self.columns: dict[str, _Column | _SpilledColumn] = {}
         self.steps = {name: _Steps() for name in _TIMES}
         self.skip = skip
+        self.spill = spill
+        self.rows = 0
 
     def add(self, **cols: np.ndarray) -> None:
         for k, v in cols.items():
             if k in self.steps:
                 self.steps[k].add(v)
             if k not in self.skip:
+                if k not in self.columns:
+                    self.columns[k] = (
+                        _Column() if self.spill is None else _SpilledColumn(self.spill / f"{k}.bin")
+                    )
                 self.columns[k].add(v)
+                self.rows = self.columns[k].rows
 
-    def concat(self) -> dict[str, np.ndarray]:
-        """One array per column; each column's blocks are released as it is joined."""
-        return {k: self.columns.pop(k).join() for k in list(self.columns)}
+    def seal(self) -> None:
+        for column in self.columns.values():
+            if isinstance(column, _SpilledColumn):
+                column.seal()
+
+    def concat(self, names: frozenset[str] | None = None) -> dict[str, np.ndarray]:
+        """One array per column (``names`` only, if given).  In memory, each column's blocks
+        are released as it is joined (once: the columns leave); spilled, each is mapped anew."""
+        keys = [k for k in self.columns if names is None or k in names]
+        if self.spill is None:
+            return {k: self.columns.pop(k).join() for k in keys}
+        return {k: self.columns[k].join() for k in keys}
 
 
 _RAIL = (1 << 13) - 1
@@ -418,6 +492,77 @@ def mcap_files(path: Path) -> list[Path]:
     return files
 
 
+@dataclass(frozen=True)
+class ScannedRecording:
+    """The IMU channel of a recording read once (:func:`scan`): its raw run columns (integer
+    counts for ADIS16364 frames), not yet scaled, time-based or framed.
+
+    In memory, :meth:`recording` may be called once (the columns leave as the frame is built);
+    spilled (``scan(..., spill_dir=...)``), as often as wanted, each call mapping the files
+    anew (the spill directory must outlive the calls and their frames)."""
+
+    path: Path
+    topic: str
+    kind: str  # "adis16364" or "imu"
+    channel: _Columns
+    temperature: _Columns | None
+    device: adis.DeviceConfig | None
+    device_meta: dict[str, str]
+    warnings: list[str]
+    topics: list[str]
+
+    @property
+    def rows(self) -> int:
+        """Frames of the channel."""
+        return self.channel.rows
+
+    def _raw(self, columns: frozenset[str] | None, use_log: bool) -> frozenset[str] | None:
+        """The raw columns a spilled channel maps to build ``columns`` (None: all kept)."""
+        if self.channel.spill is None or columns is None:
+            return None
+        raw = set(columns)
+        if "t_s" in columns:
+            raw.add("log_time_ns" if use_log else "stamp_ns")
+        if self.kind == "imu" and "temp_c" in columns:
+            raw.add("stamp_ns")  # temperature is interpolated over the stamps
+        return frozenset(raw)
+
+    def recording(self, columns: frozenset[str] | None = None) -> ImuRecording | None:
+        """The frame of the decode contract, or of ``columns`` only (``nonfinite``: bool, any
+        axis NaN/inf, if named); None if ``t_s`` needs the log time that the scan only counted
+        (``keep_one_time_base``): the file must then be read again, keeping it."""
+        warnings = list(self.warnings)
+        use_log = (columns is None or "t_s" in columns) and _uses_log_time(
+            self.channel.steps, warnings
+        )
+        if use_log and "log_time_ns" in self.channel.skip:
+            return None
+        n = self.rows
+        cols = self.channel.concat(self._raw(columns, use_log))
+        t_s, time_source = None, ""
+        if columns is None or "t_s" in columns:
+            keep_stamps = columns is None or not columns.isdisjoint({"stamp_ns", "temp_c"})
+            t_s = _seconds(cols, use_log, keep_stamps)
+            time_source = "log_time" if use_log else "header.stamp"
+        if self.device is not None:
+            frames = _adis_frame(cols, self.device, n, columns)
+            source = SCHEMA_NAME
+        else:
+            temp = self.temperature.concat() if self.temperature is not None else None
+            frames = _imu_frame(cols, temp, n, columns)
+            source = IMU_SCHEMA
+        return ImuRecording(
+            frames=frames if t_s is None else frames.with_columns(pl.Series("t_s", t_s)),
+            path=self.path,
+            topic=self.topic,
+            source=source,
+            time_source=time_source,
+            device=self.device_meta,
+            warnings=warnings,
+            topics=self.topics,
+        )
+
+
 def decode(
     path: Path,
     topic: str | None = None,
@@ -428,14 +573,37 @@ def decode(
     """Decode the IMU channel of an MCAP file or rosbag2 directory (contract: module docstring).
 
     ``columns`` restricts the frame to those contract columns, plus ``nonfinite`` (bool: any
-    axis NaN/inf) if named, so that a recording too large for memory can be decoded in passes
-    of a few columns each (:mod:`imupipe.analysis.lowmem`); None gives the whole contract.
-    ``keep_one_time_base``: for ``t_s``, keep only the header stamps while reading (both bases'
-    monotonicity is counted on the way) and read the file again for the log time in the rare
-    case the stamps are unset or broken — one int64 column less at the peak.
+    axis NaN/inf) if named, so that only what a step needs is held; None gives the whole
+    contract.  ``keep_one_time_base``: for ``t_s``, keep only the header stamps while reading
+    (both bases' monotonicity is counted on the way) and read the file again for the log time
+    in the rare case the stamps are unset or broken — one int64 column less at the peak.
 
     Raises:
         InputError: not a file, not MCAP, no IMU topic, ambiguous or unknown ``topic``.
+    """
+    scanned = scan(path, topic, progress, columns, keep_one_time_base)
+    rec = scanned.recording(columns)
+    if rec is None:  # the log time was counted, not kept: read again, keeping it
+        topic = scanned.topic
+        del scanned
+        return decode(path, topic, progress, columns)
+    return rec
+
+
+def scan(
+    path: Path,
+    topic: str | None = None,
+    progress: Callable[[int], None] | None = None,
+    columns: frozenset[str] | None = None,
+    keep_one_time_base: bool = False,
+    spill_dir: Path | None = None,
+) -> ScannedRecording:
+    """Read the recording once into the raw columns that ``columns`` needs (see
+    :func:`decode`), in memory, or appended to files in ``spill_dir`` (one sub-directory per
+    channel; the caller owns and removes the directory).
+
+    Raises:
+        InputError: as :func:`decode`.
     """
     path = Path(path)
     files = mcap_files(path)
@@ -445,7 +613,15 @@ def decode(
         return schema is not None and schema.name in kinds
 
     skip = frozenset({"log_time_ns"} if keep_one_time_base else ())
-    channels: dict[str, _Columns] = defaultdict(lambda: _Columns(skip))
+
+    def new_channel() -> _Columns:
+        if spill_dir is None:
+            return _Columns(skip)
+        folder = Path(spill_dir) / f"channel{len(channels)}"
+        folder.mkdir()
+        return _Columns(skip, folder)
+
+    channels: dict[str, _Columns] = defaultdict(new_channel)
     topic_kind: dict[str, str] = {}
     all_topics: set[str] = set()
     metadata: dict[str, dict[str, str]] = {}
@@ -506,16 +682,10 @@ def decode(
         )
     if topic not in channels:
         raise InputError(f"{path}: topic {topic} has no readable messages")
-    cols = channels[topic].concat()
-    n = len(next(iter(cols.values()))) if cols else 0
-    t_s, time_source = None, ""
-    if columns is None or "t_s" in columns:
-        use_log = _uses_log_time(channels[topic].steps, warnings)
-        if use_log and "log_time_ns" not in cols:  # counted, not kept: read again, keeping it
-            return decode(path, topic, progress, columns)
-        keep_stamps = columns is None or not columns.isdisjoint({"stamp_ns", "temp_c"})
-        t_s = _seconds(cols, use_log, keep_stamps)
-        time_source = "log_time" if use_log else "header.stamp"
+    for columns_of_channel in channels.values():
+        columns_of_channel.seal()
+    device = None
+    device_meta: dict[str, str] = {}
     if topic_kind[topic] == "adis16364":
         if METADATA_NAME not in metadata:
             raise InputError(
@@ -531,23 +701,20 @@ def decode(
                 f"{path}: unreadable '{METADATA_NAME}' metadata record ({exc!r}): scale factors "
                 "unknown"
             ) from None
-        frames = _adis_frame(cols, device, n, columns)
-        source = SCHEMA_NAME
+        temperature = None
     else:
         temp_topic = _sibling_temperature(
             topic, [t for t, k in topic_kind.items() if k == "temperature" and t in channels]
         )
-        temp = channels[temp_topic].concat() if temp_topic else None
-        frames = _imu_frame(cols, temp, n, columns)
-        device_meta = {}
-        source = IMU_SCHEMA
-    return ImuRecording(
-        frames=frames if t_s is None else frames.with_columns(pl.Series("t_s", t_s)),
+        temperature = channels[temp_topic] if temp_topic else None
+    return ScannedRecording(
         path=path,
         topic=topic,
-        source=source,
-        time_source=time_source,
-        device=device_meta,
+        kind=topic_kind[topic],
+        channel=channels[topic],
+        temperature=temperature,
+        device=device,
+        device_meta=device_meta,
         warnings=warnings,
         topics=imu_topics,
     )

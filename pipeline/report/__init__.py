@@ -1,5 +1,6 @@
 """What a user takes away: report.json/.md and imu.yaml (:mod:`.report`), figures
-(:mod:`.figures`), the Rerun recording (:mod:`.rerun_view`), the paper's values (:mod:`.paper`)."""
+(:mod:`.figures`), the Rerun recording (:mod:`.rerun_view`), the paper's values
+(:mod:`.paper`), and the orchestrator's outputs writing them all (:mod:`.outputs`)."""
 
 from imupipe.report.report import format_table, write_report
 from imupipe.report.rerun_view import RrdWriter, open_viewer
