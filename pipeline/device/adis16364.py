@@ -217,6 +217,7 @@ def spi_timing(smpl_prd: int) -> SpiTiming:
     """The SPI timing the part accepts with SMPL_PRD = ``smpl_prd``."""
     return LOW_POWER_TIMING if low_power_mode(smpl_prd) else FAST_TIMING
 
+
 INTERNAL_BASE_SPS = 1638.404
 """SMPL_PRD time base (bit 7 = 0), samples per second (Linux adis16400_get_freq)."""
 

@@ -408,9 +408,7 @@ def split_device(device: str) -> tuple[str, str | None]:
     return spi_path.strip(), line
 
 
-def open_spi_source(
-    device: str, config: DeviceConfig, data_ready: str | None = None
-) -> SpiSource:
+def open_spi_source(device: str, config: DeviceConfig, data_ready: str | None = None) -> SpiSource:
     """Open ``device`` (``/dev/spidevB.C``, optionally ``,data_ready=CHIP:LINE``), start the
     part and pace it: by the data-ready line (``data_ready`` or the device option) at a rate
     the sensor makes, by a host timer at any other rate."""
