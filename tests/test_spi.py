@@ -41,10 +41,13 @@ LINE = "/dev/gpiochip0:17"
 
 
 def install(monkeypatch, part: FakeAdis16364) -> FakeAdis16364:
-    """Put ``part`` behind the ``spidev`` and ``gpiod`` modules."""
+    """Put ``part`` behind the ``spidev`` and ``gpiod`` modules, and give the drivers that
+    :func:`open_spi_source` makes the part's virtual clock."""
     monkeypatch.setitem(sys.modules, "spidev", part.spidev_module())
     for name, module in part.gpiod_modules().items():
         monkeypatch.setitem(sys.modules, name, module)
+    virtual = {"wall_clock_ns": part.wall_clock_ns, "sleep": part.sleep}
+    monkeypatch.setattr(spi, "Adis16364Driver", lambda bus: Adis16364Driver(bus, **virtual))
     return part
 
 
@@ -131,6 +134,23 @@ def test_low_power_rate_is_clocked_at_300_khz_with_the_longer_stall(part):
     assert {(t.speed_hz, t.delay_us) for t in part.transfers[mark:]} == {(300_000, 75)}
 
 
+@pytest.mark.parametrize(
+    ("smpl_prd", "sclk_hz", "burst_hz", "stall_us"),
+    [(0x09, 2_000_000, 1_000_000, 50), (0x0A, 300_000, 300_000, 75), (0x81, 300_000, 300_000, 75)],
+)
+def test_sclk_and_stall_follow_the_mode_at_its_boundaries(
+    part, smpl_prd, sclk_hz, burst_hz, stall_us
+):
+    driver = driver_for(part)
+    driver.start(RATE_819)
+    driver.configure(smpl_prd, 0x0402)
+    driver.read_diag_stat()
+    driver.burst_read()
+    *_, read, answer, burst = part.transfers
+    assert {(t.speed_hz, t.delay_us) for t in (read, answer)} == {(sclk_hz, stall_us)}
+    assert (burst.speed_hz, burst.delay_us) == (burst_hz, stall_us)
+
+
 def test_switching_into_low_power_mode_writes_smpl_prd_slowly(part):
     driver = driver_for(part)
     driver.start(RATE_819)
@@ -177,6 +197,18 @@ def test_read_answers_on_next_frame_across_chip_select(part):
 
 
 # ---- start-up --------------------------------------------------------------------------------
+def test_restart_when_the_flash_holds_a_low_power_rate(monkeypatch):
+    part = install(monkeypatch, FakeAdis16364(flash={0x36: 0x0F}))
+    driver = driver_for(part)
+    driver.start(RATE_819)  # the reset brings SMPL_PRD 0x0F back: slow until it is rewritten
+    driver.start(RATE_819)
+    reset = [t for t in part.transfers if t.words == (0xBE80,)]
+    assert [(t.speed_hz, t.delay_us, t.mode) for t in reset] == [
+        (300_000, 75, "low_power"),
+        (300_000, 75, "fast"),
+    ]
+
+
 def test_failed_self_test_is_one_clear_error(monkeypatch):
     install(monkeypatch, part := FakeAdis16364(self_test_fail=0x0420))
     with pytest.raises(SelfTestError) as err:
@@ -222,7 +254,8 @@ def test_filter_constraint_is_checked_before_writing(part):
 
 # ---- data-ready pacing ----------------------------------------------------------------------
 def test_data_ready_pacing_has_no_duplicates_and_no_silent_skips(monkeypatch):
-    part = install(monkeypatch, FakeAdis16364(flash={0x34: 0x00C2}))  # data-ready off in flash
+    # data-ready off, on DIO2, active low in the part's flash; bits 7:6 (bias/alignment) set
+    part = install(monkeypatch, FakeAdis16364(flash={0x34: 0x00C1}))
     driver = driver_for(part)
     pacer = LateHost(DataReadyPacer(LINE, RATE_819.output_rate_hz), part, 37, 3.4 / 819.2)
     source = SpiSource(driver, RATE_819, pacer)
@@ -325,6 +358,11 @@ def test_sensor_rate_without_data_ready_line_is_refused(part):
     assert part.transfers == []  # refused before touching the part
 
 
+def test_host_rate_is_timer_paced_even_with_a_data_ready_line(part):
+    source = open_spi_source(f"/dev/spidev0.0,data_ready={LINE}", config_for_rate(100.0))
+    assert isinstance(source.pacer, TimerPacer) and source.config.pacing == "host_timer"
+
+
 def test_missing_packages_give_clear_errors(monkeypatch):
     monkeypatch.setitem(sys.modules, "spidev", None)
     monkeypatch.setitem(sys.modules, "gpiod", None)
@@ -339,19 +377,13 @@ def test_cli_records_a_sensor_rate_paced_by_data_ready(monkeypatch, tmp_path, ca
 
     from imupipe.cli import main
 
-    def use(part: FakeAdis16364) -> FakeAdis16364:
-        install(monkeypatch, part)
-        virtual = {"wall_clock_ns": part.wall_clock_ns, "sleep": part.sleep}
-        monkeypatch.setattr(spi, "Adis16364Driver", lambda bus: Adis16364Driver(bus, **virtual))
-        return part
-
     def run(*args):
         monkeypatch.setattr(sys, "argv", ["imupipe", "record", "--quiet", *args])
         with pytest.raises(SystemExit) as exit_info:
             main()
         return exit_info.value.code, capsys.readouterr().err
 
-    part = use(FakeAdis16364())
+    part = install(monkeypatch, FakeAdis16364())
     out = tmp_path / "spi.mcap"
     device = f"/dev/spidev0.0,data_ready={LINE}"
     code, _ = run("-o", str(out), "--source", "spi", "--device", device, "--rate", "819.2",
@@ -368,7 +400,7 @@ def test_cli_records_a_sensor_rate_paced_by_data_ready(monkeypatch, tmp_path, ca
     )
     assert n == 410 and all(part.burst_fresh) and np.all(np.diff(part.burst_serials) == 1)
 
-    use(FakeAdis16364(self_test_fail=1 << 13))
+    install(monkeypatch, FakeAdis16364(self_test_fail=1 << 13))
     code, err = run("-o", str(tmp_path / "bad.mcap"), "--source", "spi", "--device", device,
                     "--rate", "819.2", "--duration", "1s")  # fmt: skip
     assert code == 2
