@@ -272,6 +272,27 @@ def test_data_ready_pacing_has_no_duplicates_and_no_silent_skips(monkeypatch):
     assert msc & 0x0007 == 0x0006 and msc & 0x00C0 == 0x00C0  # DIO1, active high; 7:6 kept
 
 
+def test_fake_data_ready_line_fires_at_the_sensors_own_rate(part):
+    driver = driver_for(part)
+    driver.start(RATE_102)
+    gpiod = sys.modules["gpiod"]
+    rising = gpiod.LineSettings(edge_detection=gpiod.line.Edge.RISING)
+    request = gpiod.request_lines("/dev/gpiochip0", consumer="test", config={17: rising})
+    part.sleep(0.5)
+    events = request.read_edge_events()
+    assert len(events) == 16  # the kernel's buffer keeps the newest 16 of the 51 edges
+    assert (events[0].line_seqno, events[-1].line_seqno) == (36, 51)
+    assert np.allclose(np.diff([e.timestamp_ns for e in events]), 1e9 / 102.4, atol=1)
+
+
+def test_host_late_beyond_the_kernel_event_buffer_still_counts_every_sample(part):
+    driver = driver_for(part)
+    source = SpiSource(driver, RATE_819, LateHost(DataReadyPacer(LINE, 819.2), part, 3, 0.05))
+    block = source.frames(6)
+    assert np.array_equal(np.diff(block.counter.astype(np.int64)), np.diff(part.burst_serials))
+    assert driver.missed_frames == 80  # 2 waits 50 ms late: 41 samples each, 40 missed
+
+
 def test_host_timer_at_the_sensor_rate_reads_stale_and_skips_silently(part):
     driver = driver_for(part)
     driver.start(RATE_819)
