@@ -179,6 +179,21 @@ def test_the_part_rejects_frames_without_stall(part):
         bus.transfer([0x5600, 0x5800, 0x0000], 300_000, 100)
 
 
+def test_the_part_rejects_a_short_chip_select_period_mode_0_and_an_early_diag_read(part):
+    bus = SpidevBus("/dev/spidev0.0")
+    bus.transfer([0x5600], 2_000_000, 20)  # 8 µs frame + 20 µs: stall ok, period 28 µs
+    with pytest.raises(SpiProtocolViolation, match="tDATARATE is 40 µs"):
+        bus.transfer([0x0000], 2_000_000, 20)
+    bus._spi.mode = 0
+    with pytest.raises(SpiProtocolViolation, match="SPI mode 0"):
+        bus.transfer([0x0000], 300_000, 100)
+    bus._spi.mode = 3
+    part.sleep(0.001)  # a rejected frame takes no time
+    bus.transfer([0xB504], 300_000, 100)  # MSC_CTRL[15:8]: start the internal self-test
+    with pytest.raises(SpiProtocolViolation, match="DIAG_STAT read while the self-test"):
+        bus.transfer([0x3C00], 300_000, 100)
+
+
 def test_the_part_rejects_transfers_during_start_up(part):
     driver = Adis16364Driver(SpidevBus("/dev/spidev0.0"), sleep=lambda s: None)
     with pytest.raises(
