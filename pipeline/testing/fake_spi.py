@@ -456,14 +456,14 @@ class FakeAdis16364:
 
         def request_lines(
             path: str,
+            config: dict[int, LineSettings | None],
             consumer: str | None = None,
-            config: dict[int, LineSettings | None] | None = None,
             output_values: object = None,
             event_buffer_size: int | None = None,
-        ) -> LineRequest:
+        ) -> LineRequest:  # gpiod.request_lines(path, ...) -> Chip.request_lines(config, ...)
             if path != chip.gpio_chip:
                 raise FileNotFoundError(2, f"No such file or directory: {path!r}")
-            ((offset, settings),) = (config or {}).items()
+            ((offset, settings),) = config.items()
             size = event_buffer_size or _KERNEL_EVENT_BUFFER
             return LineRequest(offset, settings or LineSettings(), size)
 
