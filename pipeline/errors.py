@@ -34,5 +34,9 @@ class DeviceError(ImupipeError):
     """The SPI device is missing, is not an ADIS16364, or does not accept its configuration."""
 
 
+class SelfTestError(DeviceError):
+    """The ADIS16364's self-test or start-up status check (DIAG_STAT) reports a fault."""
+
+
 class ViewerError(ImupipeError):
     """No Rerun recording to show, or no Rerun viewer to show it with."""

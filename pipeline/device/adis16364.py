@@ -12,6 +12,7 @@ Units: gyro words are °/s per LSB, accelerometer words mg per LSB, temperature 
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, fields
 
 import numba
@@ -41,6 +42,12 @@ REGISTERS: dict[str, int] = {
     "XACCL_OFF": 0x20,
     "YACCL_OFF": 0x22,
     "ZACCL_OFF": 0x24,
+    "ALM_MAG1": 0x26,
+    "ALM_MAG2": 0x28,
+    "ALM_SMPL1": 0x2A,
+    "ALM_SMPL2": 0x2C,
+    "ALM_CTRL": 0x2E,
+    "AUX_DAC": 0x30,
     "GPIO_CTRL": 0x32,
     "MSC_CTRL": 0x34,
     "SMPL_PRD": 0x36,
@@ -48,17 +55,14 @@ REGISTERS: dict[str, int] = {
     "SLP_CNT": 0x3A,
     "DIAG_STAT": 0x3C,
     "GLOB_CMD": 0x3E,
-    "ALM_MAG1": 0x40,
-    "ALM_MAG2": 0x42,
-    "ALM_SMPL1": 0x44,
-    "ALM_SMPL2": 0x46,
-    "ALM_CTRL": 0x48,
-    "AUX_DAC": 0x4A,
     "LOT_ID1": 0x52,
     "LOT_ID2": 0x54,
     "PROD_ID": 0x56,
     "SERIAL_NUM": 0x58,
 }
+"""Register addresses (lower byte of each 16-bit register).  ALM_MAG1..AUX_DAC sit at 0x26-0x30
+on the ADIS1636x (Analog Devices' ADIS16364 example code and ADIS1636x headers); the 0x40-0x4A
+that the Linux ``adis16400.c`` defines are the ADIS16400's addresses."""
 
 BURST_COMMAND = 0x3E00
 """DIN word that starts a burst read (GLOB_CMD address); 11 output words follow."""
@@ -102,6 +106,117 @@ DIAG_OVER_RANGE = 1 << 4
 """DIAG_STAT bit 4: sensor over-range."""
 DIAG_SUPPLY_HIGH = 1 << 1
 DIAG_SUPPLY_LOW = 1 << 0
+
+DIAG_MESSAGES: dict[int, str] = {
+    15: "Z-axis accelerometer self-test failure",
+    14: "Y-axis accelerometer self-test failure",
+    13: "X-axis accelerometer self-test failure",
+    12: "X-axis gyroscope self-test failure",
+    11: "Y-axis gyroscope self-test failure",
+    10: "Z-axis gyroscope self-test failure",
+    9: "alarm 2 active",
+    8: "alarm 1 active",
+    6: "flash checksum error",
+    5: "self-test error",
+    4: "sensor over-range",
+    3: "SPI communication failure",
+    2: "flash update failed",
+    1: "supply above 5.25 V",
+    0: "supply below 4.75 V",
+}
+"""DIAG_STAT bit -> meaning (Linux ``adis16400_status_error_msgs``; bit 7 is undefined).  Every
+one of these flags fails the start-up check, as the kernel's ``status_error_mask`` does."""
+
+
+def diag_flags(diag_stat: int) -> list[str]:
+    """The meanings of the DIAG_STAT flags set in ``diag_stat``, highest bit first."""
+    return [text for bit, text in DIAG_MESSAGES.items() if diag_stat >> bit & 1]
+
+
+MSC_DATA_RDY_DIO2 = 1 << 0
+"""MSC_CTRL bit 0: data-ready on DIO2 (clear: DIO1)."""
+MSC_DATA_RDY_POL_HIGH = 1 << 1
+"""MSC_CTRL bit 1: data-ready active high (its rising edge marks a new sample)."""
+MSC_DATA_RDY_EN = 1 << 2
+"""MSC_CTRL bit 2: data-ready output enabled."""
+MSC_SELF_TESTS = 0x0F00
+"""MSC_CTRL bits 8-11: positive/negative manual self-test, internal self-test, memory test."""
+MSC_INT_SELF_TEST = 1 << 10
+"""MSC_CTRL bit 10: run the internal self-test; the part clears it when the test is done."""
+GLOB_CMD_SW_RESET = 1 << 7
+"""GLOB_CMD bit 7: software reset."""
+
+RESET_S = 0.130
+"""Wait after a software reset before the part answers (Linux ``adis16362_timeouts.sw_reset_ms``,
+the timeouts the kernel uses for the ADIS16364)."""
+SELF_TEST_S = 0.012
+"""Wait after starting the self-test before polling for its end (Linux ``self_test_ms``)."""
+
+SENS_AVG_MIN_TAPS_LOG2: dict[int, int] = {4: 0, 2: 2, 1: 4}
+"""Gyro range code SENS_AVG[10:8] -> least M = SENS_AVG[2:0] it allows: ±150 °/s needs M >= 2
+(N >= 4 taps), ±75 °/s needs M >= 4 (N >= 16); the NTUA ADIS16364 driver enforces the same
+(DRngFIRCtrl raises the taps to this minimum)."""
+
+
+def check_sens_avg(sens_avg: int) -> None:
+    """Raise :class:`ConfigError` unless ``sens_avg`` is a gyro range and Bartlett filter length
+    the part accepts together (see :data:`SENS_AVG_MIN_TAPS_LOG2`)."""
+    code, m = (sens_avg >> 8) & 0x7, sens_avg & 0x7
+    if code not in SENS_AVG_MIN_TAPS_LOG2:
+        raise ConfigError(f"SENS_AVG 0x{sens_avg:04X} selects no valid gyro range")
+    if m < SENS_AVG_MIN_TAPS_LOG2[code]:
+        raise ConfigError(
+            f"SENS_AVG 0x{sens_avg:04X}: the ±{GYRO_RANGES_DPS[code][0]:g} °/s range needs "
+            f"SENS_AVG[2:0] >= {SENS_AVG_MIN_TAPS_LOG2[code]} "
+            f"(>= {1 << SENS_AVG_MIN_TAPS_LOG2[code]} filter taps), got {m}"
+        )
+
+
+@dataclass(frozen=True)
+class SpiTiming:
+    """SCLK and stall the part allows in one operating mode.
+
+    ``sclk_hz`` clocks register reads and writes, ``burst_hz`` burst reads; ``stall_us`` is the
+    idle time after every 16-bit frame (and after a burst) before the next frame starts.
+    """
+
+    sclk_hz: int
+    burst_hz: int
+    stall_us: int
+
+
+LINUX_FRAME_DELAY_US = 50
+"""The Linux adis driver waits 50 µs after every 16-bit frame (``read_delay``/``write_delay``)."""
+DATASHEET_STALL_US = {"fast": 9, "low_power": 75}
+"""tDATASTALL, least time between 16-bit frames (ADIS1636x/ADIS16400 timing table)."""
+DATASHEET_PERIOD_US = {"fast": 40, "low_power": 100}
+"""tDATARATE, least chip-select period from one frame's start to the next (same table)."""
+
+
+def _timing(mode: str, sclk_hz: int, burst_hz: int) -> SpiTiming:
+    """Stall = the longest of the kernel's proven delay, tDATASTALL and what tDATARATE leaves
+    after a 16-bit frame at ``sclk_hz``."""
+    frame_us = 16e6 / sclk_hz
+    need = max(LINUX_FRAME_DELAY_US, DATASHEET_STALL_US[mode], DATASHEET_PERIOD_US[mode] - frame_us)
+    return SpiTiming(sclk_hz, burst_hz, math.ceil(need))
+
+
+FAST_TIMING = _timing("fast", 2_000_000, 1_000_000)
+"""SMPL_PRD[7:0] <= 0x09: SCLK <= 2 MHz, bursts <= 1 MHz (datasheets; Linux SPI_FAST/BURST)."""
+LOW_POWER_TIMING = _timing("low_power", 300_000, 300_000)
+"""Low-power mode (Ns >= 0x0A or the slow time base): SCLK <= 300 kHz for everything, bursts
+included (datasheets; Linux SPI_SLOW).  Also the safe timing while SMPL_PRD is unknown."""
+
+
+def low_power_mode(smpl_prd: int) -> bool:
+    """Whether SMPL_PRD puts the part in low-power mode: Ns >= 0x0A or the 52.851 SPS base."""
+    return bool(smpl_prd & 0x80) or (smpl_prd & 0x7F) >= 0x0A
+
+
+def spi_timing(smpl_prd: int) -> SpiTiming:
+    """The SPI timing the part accepts with SMPL_PRD = ``smpl_prd``."""
+    return LOW_POWER_TIMING if low_power_mode(smpl_prd) else FAST_TIMING
+
 
 INTERNAL_BASE_SPS = 1638.404
 """SMPL_PRD time base (bit 7 = 0), samples per second (Linux adis16400_get_freq)."""
@@ -213,7 +328,9 @@ class DeviceConfig:
     ``output_rate_hz`` is the rate frames are recorded at; ``rate_method`` says whether the
     sensor's SMPL_PRD divider produced it (``"smpl_prd"``) or a host timer polled the filtered
     internal stream with sample-and-hold (``"host_poll"``, the paper's set-up, aliasing noise
-    above the Nyquist frequency of the output rate).
+    above the Nyquist frequency of the output rate).  ``pacing`` says how a real sensor's reads
+    were timed: ``"data_ready"`` (each read on the part's DIO1 data-ready edge) or
+    ``"host_timer"``; it is empty for the simulator and then left out of the metadata.
     """
 
     product_id: int = PROD_ID_VALUE
@@ -224,6 +341,7 @@ class DeviceConfig:
     rate_method: str = "host_poll"
     source: str = "sim"
     frame_id: str = "adis16364"
+    pacing: str = ""
 
     @property
     def internal_rate_sps(self) -> float:
@@ -235,7 +353,7 @@ class DeviceConfig:
 
     def to_metadata(self) -> dict[str, str]:
         """Flat string map for an MCAP Metadata record named ``adis16364``."""
-        meta = {k: str(v) for k, v in asdict(self).items()}
+        meta = {k: str(v) for k, v in asdict(self).items() if k != "pacing" or v}
         meta.update(
             {
                 "internal_rate_sps": repr(self.internal_rate_sps),
@@ -263,6 +381,7 @@ class DeviceConfig:
             rate_method=meta["rate_method"],
             source=meta["source"],
             frame_id=meta.get("frame_id", "adis16364"),
+            pacing=meta.get("pacing", ""),
         )
 
 
