@@ -81,6 +81,7 @@ def record(
     truth: str | Path | None = None,
     source: str = "sim",
     device: str = "/dev/spidev0.0",
+    data_ready: str | None = None,
     serial: int = 0,
     realtime: bool = False,
     progress: bool = False,
@@ -95,6 +96,8 @@ def record(
         scenario: TOML scenario of noise terms and effects (simulator only).
         truth: write the simulator's ground truth to this JSON file.
         source: ``"sim"`` (virtual ADIS16364) or ``"spi"`` (a real one on ``device``).
+        data_ready: ``CHIP:LINE`` of the GPIO wired to the sensor's DIO1 (e.g.
+            ``/dev/gpiochip0:17``): a rate the sensor makes is then read on its data-ready edge.
         realtime: pace the simulator in real time (a real sensor always is).
 
     Raises:
@@ -116,7 +119,7 @@ def record(
             raise ImupipeError("--scenario and --truth apply to the simulator only (--source sim)")
         from imupipe.recording.spi import open_spi_source
 
-        frame_source = open_spi_source(device, config)
+        frame_source = open_spi_source(device, config, data_ready=data_ready)
     else:
         raise ImupipeError(f"unknown source {source!r} (sim or spi)")
     n_frames = max(1, math.floor(seconds * frame_source.config.output_rate_hz + 0.5))

@@ -71,6 +71,13 @@ def record(
     device: Annotated[str, typer.Option(help="spidev device for --source spi.")] = (
         "/dev/spidev0.0"
     ),
+    data_ready: Annotated[
+        str | None,
+        typer.Option(
+            help="GPIO CHIP:LINE wired to the sensor's DIO1 (--source spi), e.g. "
+            "/dev/gpiochip0:17: rates the sensor makes are read on its data-ready edge."
+        ),
+    ] = None,
     serial: Annotated[int, typer.Option(help="Serial number stored in the metadata.")] = 0,
     realtime: Annotated[bool, typer.Option(help="Pace the simulator in real time.")] = False,
     quiet: Quiet = False,
@@ -87,6 +94,7 @@ def record(
         truth=truth,
         source=source.value,
         device=device,
+        data_ready=data_ready,
         serial=serial,
         realtime=realtime,
         progress=not quiet,

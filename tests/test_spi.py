@@ -423,8 +423,8 @@ def test_cli_records_a_sensor_rate_paced_by_data_ready(monkeypatch, tmp_path, ca
     part = install(monkeypatch, FakeAdis16364())
     out = tmp_path / "spi.mcap"
     device = f"/dev/spidev0.0,data_ready={LINE}"
-    code, _ = run("-o", str(out), "--source", "spi", "--device", device, "--rate", "819.2",
-                  "--duration", "0.5s")  # fmt: skip
+    code, _ = run("-o", str(out), "--source", "spi", "--device", "/dev/spidev0.0",
+                  "--data-ready", LINE, "--rate", "819.2", "--duration", "0.5s")  # fmt: skip
     assert code == 0
     with out.open("rb") as f:
         reader = make_reader(f)
