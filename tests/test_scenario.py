@@ -21,7 +21,7 @@ SAMPLE_LOGS = Path(__file__).resolve().parent.parent / "sample_logs"
 
 
 def test_documented_example_parses():
-    text = (SAMPLE_LOGS.parent / "README.md").read_text()
+    text = (SAMPLE_LOGS.parent / "docs" / "user-guide.md").read_text()
     block = re.search(r"```toml\n(.*?)```", text, re.S).group(1)
     s = scenario_from_dict(tomllib.loads(block))
     assert s.noise["gyro_x"].rate_random_walk == 1.3e-4
