@@ -42,9 +42,11 @@ from imupipe.io.mcap_walk import MESSAGE_HEAD, RECORD_HEAD, MessageIndex, gather
 
 MAGIC = b"\x89MCAP0\r\n"
 _CHUNK_FIXED = 8 + 8 + 8  # message_start_time, message_end_time, uncompressed_size
-PREFETCH_RECORDS = 2
+UNPACK_THREADS = 2
+PREFETCH_RECORDS = 4
 """Records read ahead of the one being decoded; chunks among them are decompressed, CRC-checked
-and indexed on a worker thread meanwhile (zstd, lz4, crc32 and the walk release the GIL)."""
+and indexed on :data:`UNPACK_THREADS` worker threads meanwhile (zstd, lz4, crc32 and the walk
+release the GIL): on a busy bag unpacking costs about twice the decoding."""
 MESSAGE_BLOCK = 4 << 20
 """Bytes read at once where top-level Message records follow each other (an unchunked file):
 they are indexed by one compiled walk, not parsed one by one."""
@@ -269,7 +271,7 @@ class McapScanner:
     def batches(self) -> Iterator[MessageBatch]:
         """The wanted channels' messages, one batch per channel and chunk, in file order;
         chunks are unpacked a few records ahead."""
-        with ThreadPoolExecutor(1, thread_name_prefix="mcap-unpack") as pool:
+        with ThreadPoolExecutor(UNPACK_THREADS, thread_name_prefix="mcap-unpack") as pool:
             pending: deque[tuple[int, bytes | _Block | Future, int]] = deque()
             for opcode, body, length in self._records():
                 pending.append(
@@ -333,6 +335,7 @@ class McapScanner:
         data[:RECORD_HEAD] = head
         f.readinto(memoryview(data)[RECORD_HEAD:])
         buf = np.frombuffer(data, np.uint8)
+        buf.flags.writeable = False  # as a chunk's bytes: one compiled walk for both
         index = index_messages(buf)
         if not len(index):
             f.seek(pos + RECORD_HEAD)

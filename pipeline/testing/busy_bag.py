@@ -19,6 +19,8 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from imupipe.device.adis16364 import FrameBlock
+from imupipe.device.frame_schema import SCHEMA_NAME, encode_frames, message_definition
 from imupipe.testing.ros_cdr import imu_payloads, temperature_payloads
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
@@ -40,6 +42,8 @@ class Stream:
     msgtype: str
     payloads: list[bytes]
     log_time: np.ndarray
+    definition: str | None = None
+    """The ``ros2msg`` schema text; None: rosbags' definition of ``msgtype``."""
 
 
 def _times(seconds: float, rate_hz: float, rng: np.random.Generator) -> np.ndarray:
@@ -117,6 +121,26 @@ def imu_stream(topic: str, seconds: float, rate_hz: float, seed: int) -> Stream:
     return Stream(topic, "sensor_msgs/msg/Imu", payloads, log_time)
 
 
+def adis_stream(topic: str, seconds: float, rate_hz: float, seed: int) -> Stream:
+    """Our ADIS16364 frames (random burst words) with :data:`FRAME_IDS` cycled."""
+    rng = np.random.default_rng(seed)
+    log_time = _times(seconds, rate_hz, rng)
+    n = len(log_time)
+    frames = FrameBlock(
+        stamp_ns=log_time - rng.integers(0, 2_000_000, n),
+        counter=np.arange(n, dtype=np.uint32),
+        burst=rng.integers(0, 1 << 16, (n, 11), dtype=np.uint16),
+        diag_stat=rng.integers(0, 1 << 16, n, dtype=np.uint16),
+        diag_valid=rng.random(n) < 0.9,
+    )
+    payloads: list[bytes] = [b""] * n
+    for k, fid in enumerate(FRAME_IDS):
+        rows = np.arange(k, n, len(FRAME_IDS))
+        for i, row in zip(rows.tolist(), encode_frames(frames[rows], fid), strict=True):
+            payloads[i] = row.tobytes()
+    return Stream(topic, SCHEMA_NAME, payloads, log_time, message_definition())
+
+
 def other_streams(seconds: float, camera: bool, seed: int) -> list[Stream]:
     """``/tf`` 100 Hz, ``/odom`` 50 Hz, ``/imu/temperature`` 10 Hz and, with ``camera``, a
     10 Hz ``/camera/image/compressed`` of 20 kB incompressible (JPEG-like) images."""
@@ -144,9 +168,10 @@ def write_bag(
     compression: str = "zstd",
     chunked: bool = True,
     chunk_size: int = 1 << 20,
+    metadata: dict[str, dict[str, str]] | None = None,
 ) -> int:
-    """Write the streams' messages in arrival (log time) order with the mcap library's Writer;
-    returns the number of messages."""
+    """Write the streams' messages in arrival (log time) order with the mcap library's Writer,
+    and the ``metadata`` records; returns the number of messages."""
     times = np.concatenate([s.log_time for s in streams])
     which = np.concatenate([np.full(len(s.log_time), k) for k, s in enumerate(streams)])
     index = np.concatenate([np.arange(len(s.log_time)) for s in streams])
@@ -160,8 +185,10 @@ def write_bag(
         )
         w.start(profile="ros2", library="imupipe busy_bag")
         channels = []
+        for name, data in (metadata or {}).items():
+            w.add_metadata(name, data)
         for s in streams:
-            text, _ = TYPESTORE.generate_msgdef(s.msgtype, ros_version=2)
+            text = s.definition or TYPESTORE.generate_msgdef(s.msgtype, ros_version=2)[0]
             sid = w.register_schema(s.msgtype, "ros2msg", text.encode())
             channels.append(w.register_channel(s.topic, "cdr", sid))
         payloads = [s.payloads for s in streams]
