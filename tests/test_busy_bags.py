@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.typesys import get_types_from_msg
 
 from imupipe.device import adis16364 as adis
@@ -173,3 +175,25 @@ def test_interleaved_adis_frames_equal_rosbags(tmp_path: Path, compression: str)
     gyro_scale = device.gyro_scale_dps * RAD_PER_DEG
     np.testing.assert_array_equal(f["gyro_x"].to_numpy(), counts[1] * gyro_scale)
     np.testing.assert_array_equal(f["flag_nd"].to_numpy(), new_data)
+
+
+def test_rosbags_writer_bag(tmp_path: Path, streams) -> None:
+    """The same topics written by rosbags' rosbag2 MCAP writer (its own chunking), read as the
+    rosbag2 directory."""
+    bag = tmp_path / "bag"
+    with Rosbag2Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connections = [
+            writer.add_connection(s.topic, s.msgtype, typestore=TYPESTORE) for s in streams
+        ]
+        arrivals = sorted(
+            (t, k, i) for k, s in enumerate(streams) for i, t in enumerate(s.log_time.tolist())
+        )
+        for t, k, i in arrivals:
+            writer.write(connections[k], t, streams[k].payloads[i])
+    path = next(bag.glob("*.mcap"))
+    assert longest_run(path) <= 2
+    for topic in TOPICS:
+        rec = decode(bag, topic=topic)
+        stamps, axes = rosbags_imu(path, topic)
+        np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
+        assert_bits_equal(rec.frames.select(AXES).to_numpy(), axes)
