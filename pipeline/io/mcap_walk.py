@@ -24,15 +24,6 @@ MESSAGE_HEAD = RECORD_HEAD + MESSAGE_FIXED  # bytes of a Message record before i
 _OPCODE_MESSAGE = 0x05
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _u64(buf: np.ndarray, at: int) -> np.uint64:
-    """Little-endian u64 at byte ``at`` of ``buf``."""
-    v = np.uint64(0)
-    for k in range(8):
-        v |= np.uint64(buf[at + k]) << np.uint64(8 * k)
-    return v
-
-
 @numba.njit(cache=True, nogil=True)
 def _walk(buf, pos, end, offset, size, channel, log_time):  # pragma: no cover - compiled
     """Index consecutive well-formed Message records of ``buf[pos:end]``; stop at the first
@@ -40,18 +31,22 @@ def _walk(buf, pos, end, offset, size, channel, log_time):  # pragma: no cover -
     running past ``end``) or when fewer than a record head's bytes remain.
     Returns (messages indexed, byte where the walk stopped)."""
     n = 0
-    while end - pos >= RECORD_HEAD:
-        if buf[pos] != _OPCODE_MESSAGE:
+    while end - pos >= RECORD_HEAD and buf[pos] == _OPCODE_MESSAGE:
+        length = 0  # u64 little endian; a length beyond 2**63 ends the walk as it wraps < 0
+        for k in range(8):
+            length |= np.int64(buf[pos + 1 + k]) << (8 * k)
+        if length < MESSAGE_FIXED or length > end - pos - RECORD_HEAD:
             break
-        length = _u64(buf, pos + 1)
-        if length < np.uint64(MESSAGE_FIXED) or length > np.uint64(end - pos - RECORD_HEAD):
-            break
-        channel[n] = np.uint16(buf[pos + RECORD_HEAD]) | (np.uint16(buf[pos + 10]) << 8)
-        log_time[n] = _u64(buf, pos + RECORD_HEAD + 6)
+        at = pos + RECORD_HEAD
+        channel[n] = buf[at] | (np.uint16(buf[at + 1]) << 8)
+        time = np.uint64(0)
+        for k in range(8):
+            time |= np.uint64(buf[at + 6 + k]) << np.uint64(8 * k)
+        log_time[n] = time
         offset[n] = pos + MESSAGE_HEAD
-        size[n] = np.int64(length) - MESSAGE_FIXED
+        size[n] = length - MESSAGE_FIXED
         n += 1
-        pos += RECORD_HEAD + np.int64(length)
+        pos = at + length
     return n, pos
 
 
