@@ -7,7 +7,8 @@ Writer, zstd chunks of 1 MiB, :mod:`imupipe.testing.busy_bag`):
 * ``busy``: ``sensor_msgs/msg/Imu`` at ``--imu-rate`` Hz (frame_id changing length per message)
   + ``/tf`` 100 Hz + ``/odom`` 50 Hz + a 10 Hz temperature topic;
 * ``busy+camera``: the same plus a 10 Hz ``sensor_msgs/msg/CompressedImage`` of 20 kB;
-* ``adis+tf``: our ADIS16364 frames at ``--imu-rate`` Hz interleaved with ``/tf``.
+* ``adis+tf``: our ADIS16364 frames at ``--imu-rate`` Hz interleaved with ``/tf``;
+* with ``--recorder-hours H``: our recorder's own file (ADIS frames alone, simulated).
 
 Ours is :func:`imupipe.io.decode.decode` (whole decode contract: stamps, six axes in SI units,
 temperature, time base); the baselines only get the IMU messages (``iter_messages`` without any
@@ -18,7 +19,8 @@ call loads the compiled kernels); each baseline once.
 ``--analyze`` also times the whole ``imupipe analyze`` (all stages, rrd included) of the busy
 bag, run as a user runs it (a child process).
 
-Usage: ``python benchmarks/bench_decode.py [--minutes 60] [--imu-rate 200] [--analyze]``
+Usage: ``python benchmarks/bench_decode.py [--minutes 60] [--imu-rate 200] [--analyze]
+[--recorder-hours 12]``
 """
 
 from __future__ import annotations
@@ -35,19 +37,21 @@ from pathlib import Path
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
-from imupipe.device.adis16364 import DeviceConfig
-from imupipe.device.frame_schema import METADATA_NAME
+from imupipe.device.adis16364 import DeviceConfig, config_for_rate
+from imupipe.device.frame_schema import DEFAULT_TOPIC, METADATA_NAME
 from imupipe.io.decode import decode
+from imupipe.record.recorder import record
+from imupipe.record.simulator import VirtualADIS16364
 from imupipe.testing.busy_bag import adis_stream, imu_stream, other_streams, write_rosbag2
 
 IMU_TOPIC = "/imu/data"
 
 
-def iter_messages(path: Path) -> int:
+def iter_messages(path: Path, topic: str = IMU_TOPIC) -> int:
     """IMU messages through the mcap library's reader (framing only, no CDR decoding)."""
     count = 0
     with open(path, "rb") as f:
-        for _ in make_reader(f).iter_messages(topics=[IMU_TOPIC]):
+        for _ in make_reader(f).iter_messages(topics=[topic]):
             count += 1
     return count
 
@@ -97,9 +101,11 @@ def ratio(name: str, base: Timing, ours: Timing) -> str:
     return f"  ratio {name} / imupipe decode: wall {wall:.1f}x, CPU {cpu:.1f}x"
 
 
-def bench(name: str, bag: Path, mcap_file: Path, repeat: int, rosbags: bool) -> None:
-    ours, n = timed(lambda: decode(bag, topic=IMU_TOPIC).frames.height, repeat)
-    base, count = timed(lambda: iter_messages(mcap_file))
+def bench(
+    name: str, bag: Path, mcap_file: Path, repeat: int, rosbags: bool, topic: str = IMU_TOPIC
+) -> None:
+    ours, n = timed(lambda: decode(bag, topic=topic).frames.height, repeat)
+    base, count = timed(lambda: iter_messages(mcap_file, topic))
     assert count == n, (count, n)
     size_mb = mcap_file.stat().st_size / 1e6
     print(f"\n{name}: {n} IMU messages, file {size_mb:.0f} MB")
@@ -119,6 +125,12 @@ def main() -> None:
     parser.add_argument("--imu-rate", type=float, default=200.0)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--analyze", action="store_true", help="also time imupipe analyze")
+    parser.add_argument(
+        "--recorder-hours",
+        type=float,
+        default=0.0,
+        help="also our recorder's own file (ADIS frames alone) of this length at --imu-rate",
+    )
     args = parser.parse_args()
     seconds = args.minutes * 60
     with tempfile.TemporaryDirectory() as tmp:
@@ -149,6 +161,12 @@ def main() -> None:
         meta = {METADATA_NAME: DeviceConfig().to_metadata()}
         mcap_file = write_rosbag2(bag, adis, metadata=meta)
         bench("adis+tf", bag, mcap_file, args.repeat, rosbags=False)
+        if args.recorder_hours:
+            path = Path(tmp) / "recorder.mcap"
+            n = round(args.recorder_hours * 3600 * args.imu_rate)
+            record(path, VirtualADIS16364(config_for_rate(args.imu_rate), seed=2), n)
+            name = f"recorder {args.recorder_hours:g} h (ADIS frames alone)"
+            bench(name, path, path, args.repeat, rosbags=False, topic=DEFAULT_TOPIC)
 
 
 if __name__ == "__main__":

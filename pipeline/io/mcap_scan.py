@@ -214,11 +214,38 @@ def _decompress(chunk: Chunk) -> bytes:
     raise InputError(f"unsupported compression {chunk.compression!r}")
 
 
+_CHUNK_HEAD = struct.Struct("<QQQII")
+"""A Chunk record's fields before ``records`` (MCAP spec: message_start_time u64,
+message_end_time u64, uncompressed_size u64, uncompressed_crc u32, compression string: u32
+length + UTF-8)."""
+
+
+def _parse_chunk(body: bytes) -> Chunk:
+    """The mcap library's :class:`Chunk` of a record body, its ``data`` a view of ``body``:
+    ``Chunk.read`` copies the compressed records (a camera bag's whole size once more)."""
+    view = memoryview(body)
+    start, end, size, crc, name_len = _CHUNK_HEAD.unpack_from(view)
+    at = _CHUNK_HEAD.size + name_len
+    compression = str(view[_CHUNK_HEAD.size : at], "utf-8")
+    (records_len,) = struct.unpack_from("<Q", view, at)
+    data = view[at + 8 : at + 8 + records_len]
+    if len(data) != records_len:
+        raise ValueError("chunk records run past the record's end")
+    return Chunk(
+        message_start_time=start,
+        message_end_time=end,
+        uncompressed_size=size,
+        uncompressed_crc=crc,
+        compression=compression,
+        data=data,
+    )
+
+
 def _unpack(body: bytes) -> tuple[Chunk, np.ndarray, str, MessageIndex | None]:
     """Parse a Chunk record, decompress it, check its CRC and index its leading Message
     records: (chunk, records, reason, index), the reason why it cannot be read (empty if it
     can; then no index)."""
-    chunk = _parse(Chunk, body)
+    chunk = _parse_chunk(body)
     try:
         data = _decompress(chunk)
     except Exception as exc:  # each codec raises its own error types
