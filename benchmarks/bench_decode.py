@@ -134,7 +134,7 @@ def main() -> None:
     args = parser.parse_args()
     seconds = args.minutes * 60
     with tempfile.TemporaryDirectory() as tmp:
-        imu = imu_stream(IMU_TOPIC, seconds, args.imu_rate, seed=1)
+        imu = imu_stream(IMU_TOPIC, seconds, args.imu_rate, seed=1, awkward=False)
         cases = {
             "busy": [imu, *other_streams(seconds, camera=False, seed=2)],
             "busy+camera": [imu, *other_streams(seconds, camera=True, seed=2)],

@@ -102,16 +102,20 @@ def _stamped(template: bytes, times: np.ndarray, at: int) -> list[bytes]:
     return [row.tobytes() for row in out]
 
 
-def imu_stream(topic: str, seconds: float, rate_hz: float, seed: int) -> Stream:
-    """An Imu topic with :data:`FRAME_IDS` cycled and :data:`AWKWARD` values among the axes."""
+def imu_stream(
+    topic: str, seconds: float, rate_hz: float, seed: int, awkward: bool = True
+) -> Stream:
+    """An Imu topic with :data:`FRAME_IDS` cycled and, if ``awkward``, the :data:`AWKWARD`
+    values among the first gyro and last accelerometer samples."""
     rng = np.random.default_rng(seed)
     log_time = _times(seconds, rate_hz, rng)
     n = len(log_time)
     stamps = log_time - rng.integers(0, 2_000_000, n)  # stamped before arrival
     gyro = rng.normal(0, 0.01, (n, 3))
     accel = rng.normal(0, 0.03, (n, 3)) + np.array([0.0, 0.0, 9.81])
-    gyro.flat[: min(len(AWKWARD), gyro.size)] = AWKWARD[: gyro.size]
-    accel.flat[-min(len(AWKWARD), accel.size) :] = AWKWARD[: accel.size][::-1]
+    if awkward:
+        gyro.flat[: min(len(AWKWARD), gyro.size)] = AWKWARD[: gyro.size]
+        accel.flat[-min(len(AWKWARD), accel.size) :] = AWKWARD[: accel.size][::-1]
     payloads: list[bytes] = [b""] * n
     for k, fid in enumerate(FRAME_IDS):
         rows = np.arange(k, n, len(FRAME_IDS))
