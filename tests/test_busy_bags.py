@@ -197,3 +197,26 @@ def test_rosbags_writer_bag(tmp_path: Path, streams) -> None:
         stamps, axes = rosbags_imu(path, topic)
         np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
         assert_bits_equal(rec.frames.select(AXES).to_numpy(), axes)
+
+
+def test_unchunked_messages_between_other_records(tmp_path: Path) -> None:
+    """Top-level Message records (an unchunked file) read in blocks: stretches of messages
+    broken by attachments, the blocks growing and shrinking, every message read once."""
+    imu = imu_stream(TOPICS[0], 2.0, 200, seed=3)
+    buf = io.BytesIO()
+    w = Writer(buf, use_chunking=False)
+    w.start(profile="ros2", library="test")
+    text = TYPESTORE.generate_msgdef(IMU_SCHEMA, ros_version=2)[0].encode()
+    cid = w.register_channel(TOPICS[0], "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", text))
+    for i, t in enumerate(imu.log_time.tolist()):
+        w.add_message(cid, t, imu.payloads[i], t)
+        if i % 97 in (0, 1, 5):  # stretches of 1, 4 and 92 messages
+            w.add_attachment(create_time=t, log_time=t, name="a", media_type="x", data=b"z" * i)
+    w.finish()
+    path = tmp_path / "unchunked.mcap"
+    path.write_bytes(buf.getvalue())
+    rec = decode(path)
+    stamps, axes = rosbags_imu(path, TOPICS[0])
+    assert rec.frames.height == len(imu.log_time) == len(stamps)
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
+    assert_bits_equal(rec.frames.select(AXES).to_numpy(), axes)

@@ -2,8 +2,9 @@
 
 The mcap library's indexed reader needs an intact summary section and its per-message reader
 runs ~100 k messages/s in Python.  This scanner walks the file record by record (MCAP spec:
-``opcode u8, length u64, body``), parses Schema, Channel, Metadata and Chunk bodies with the mcap
-library's own record classes, decompresses each chunk and indexes its Message records with a
+``opcode u8, length u64, body``), parses Schema, Channel and Metadata bodies with the mcap
+library's own record classes (Chunk bodies into its :class:`Chunk`, without copying the
+compressed records), decompresses each chunk and indexes its Message records with a
 compiled walk (:mod:`imupipe.io.mcap_walk`), on a worker thread while the previous chunk is
 decoded.  A chunk's messages of each wanted channel become one :class:`MessageBatch` (payload
 offsets into the decompressed chunk), however the channels interleave.  Top-level Message
@@ -47,9 +48,11 @@ PREFETCH_RECORDS = 4
 """Records read ahead of the one being decoded; chunks among them are decompressed, CRC-checked
 and indexed on :data:`UNPACK_THREADS` worker threads meanwhile (zstd, lz4, crc32 and the walk
 release the GIL): on a busy bag unpacking costs about twice the decoding."""
-MESSAGE_BLOCK = 4 << 20
-"""Bytes read at once where top-level Message records follow each other (an unchunked file):
-they are indexed by one compiled walk, not parsed one by one."""
+MESSAGE_BLOCK = (64 << 10, 4 << 20)
+"""Least and most bytes read at once where top-level Message records follow each other (an
+unchunked file): they are indexed by one compiled walk, not parsed one by one.  The block
+doubles while the messages fill it and falls back to the least when they do not, so a file
+that alternates messages with other records costs no more than reading it."""
 _PARSED = (Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA)
 _MALFORMED = (McapError, UnicodeDecodeError, struct.error, ValueError, OverflowError)
 """What the mcap library's record parsers raise on bytes that are not a valid record."""
@@ -283,6 +286,7 @@ class McapScanner:
         self._wanted_ids = np.zeros(1 << 16, bool)  # by channel id (u16)
         self._progress = progress or (lambda n: None)
         self._cut_head: bytes | None = None  # fixed fields of a chunk cut off by the file's end
+        self._block_bytes = MESSAGE_BLOCK[0]
 
     def _add_channel(self, channel: Channel) -> None:
         self.report.channels[channel.id] = channel
@@ -352,18 +356,22 @@ class McapScanner:
                     break
 
     def _message_block(self, f: BinaryIO, head: bytes, pos: int) -> _Block | None:
-        """Read :data:`MESSAGE_BLOCK` bytes (at least the whole record) from the Message record
-        at ``pos`` whose head was just read, and index the Message records that follow each
-        other there; None, the file back after the head, if the first one is malformed."""
+        """Read a block (:data:`MESSAGE_BLOCK`; at least the whole record) from the Message
+        record at ``pos`` whose head was just read, and index the Message records that follow
+        each other there; None, the file back after the head, if the first one is malformed."""
         length = struct.unpack_from("<Q", head, 1)[0]
         data = bytearray(
-            min(max(MESSAGE_BLOCK, RECORD_HEAD + length), self.report.file_bytes - pos)
+            min(max(self._block_bytes, RECORD_HEAD + length), self.report.file_bytes - pos)
         )
         data[:RECORD_HEAD] = head
         f.readinto(memoryview(data)[RECORD_HEAD:])
         buf = np.frombuffer(data, np.uint8)
         buf.flags.writeable = False  # as a chunk's bytes: one compiled walk for both
         index = index_messages(buf)
+        filled = index.stop > len(buf) // 2
+        self._block_bytes = (
+            min(2 * self._block_bytes, MESSAGE_BLOCK[1]) if filled else MESSAGE_BLOCK[0]
+        )
         if not len(index):
             f.seek(pos + RECORD_HEAD)
             return None
