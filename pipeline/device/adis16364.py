@@ -284,7 +284,7 @@ _BURST_SIGNS = np.array(
 )
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(cache=True, nogil=True)
 def _decode_burst(
     burst: np.ndarray, masks: np.ndarray, signs: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover (JIT)
@@ -292,7 +292,7 @@ def _decode_burst(
     counts = np.empty((words, n), dtype=np.int16)
     new_data = np.empty(n, dtype=np.bool_)
     alarm = np.empty(n, dtype=np.bool_)
-    for i in numba.prange(n):
+    for i in range(n):  # serial: called per MCAP chunk, where a parallel launch costs more
         nd = True
         ea = False
         for w in range(words):

@@ -1,7 +1,8 @@
-"""Bytes in and out: the MCAP scanner (:mod:`.mcap_scan`) and bulk writer (:mod:`.mcap_bulk`),
-the decoders of ADIS16364 frames and ROS 2 ``sensor_msgs/msg/Imu`` into a polars frame
-(:mod:`.decode`), rosbag2 directories, the column sources the analysis reads from (in memory,
-or spilled to a temporary on-disk store: :mod:`.columns`), and ``imupipe info`` (:mod:`.info`)."""
+"""Bytes in and out: the MCAP scanner (:mod:`.mcap_scan`, its compiled record walk
+:mod:`.mcap_walk`) and bulk writer (:mod:`.mcap_bulk`), the decoders of ADIS16364 frames and
+ROS 2 ``sensor_msgs/msg/Imu`` into a polars frame (:mod:`.decode`), rosbag2 directories, the
+column sources the analysis reads from (in memory, or spilled to a temporary on-disk store:
+:mod:`.columns`), and ``imupipe info`` (:mod:`.info`)."""
 
 from imupipe.io.columns import ColumnSource, open_columns
 from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, ImuRecording, mcap_files

@@ -8,8 +8,10 @@ Two kinds of IMU channel are understood:
 * ``sensor_msgs/msg/Imu`` from any ROS 2 driver, with ``sensor_msgs/msg/Temperature`` on a
   sibling topic used as the temperature channel when present.
 
-Messages are decoded in runs (see :mod:`imupipe.io.mcap_scan`): the fields after the header are
-read at fixed offsets from the end of each CDR payload, so any ``frame_id`` length works.
+Messages are decoded a chunk at a time, however the topics interleave (see
+:mod:`imupipe.io.mcap_scan`): each payload's ``frame_id`` length gives, per message, where the
+fields after the header start, and each field is gathered from all of the chunk's messages at
+once (:func:`imupipe.io.mcap_walk.gather`: the bytes are copied, so the values are exact).
 
 Output contract (:class:`ImuRecording`): ``frames`` has one row per message, sorted as recorded,
 with the columns of :data:`DECODED_SCHEMA`: ``stamp_ns`` (i64, header stamp), ``gyro_x/y/z``
@@ -40,7 +42,8 @@ from mcap.records import Channel, Schema
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
 from imupipe.errors import InputError
-from imupipe.io.mcap_scan import McapScanner, MessageRun
+from imupipe.io.mcap_scan import McapScanner, MessageBatch
+from imupipe.io.mcap_walk import gather
 from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
 from imupipe.vocab import AXES
 
@@ -84,37 +87,63 @@ class ImuRecording:
     topics: list[str] = field(default_factory=list)
 
 
-def _stamps(payloads: np.ndarray) -> np.ndarray:
-    """header.stamp (sec i32 @4, nanosec u32 @8 of the CDR payload) → ns, int64."""
-    head = np.ascontiguousarray(payloads[:, 4:12])
-    sec = head[:, 0:4].copy().view("<i4")[:, 0].astype(np.int64)
-    nsec = head[:, 4:8].copy().view("<u4")[:, 0].astype(np.int64)
-    return sec * 1_000_000_000 + nsec
+_CDR_HEAD = 16
+"""Payload bytes up to the frame_id characters: encapsulation (4), header.stamp sec i32 and
+nanosec u32, frame_id length u32."""
 
 
-def _well_formed(payloads: np.ndarray, alignment: int, tail: int) -> np.ndarray:
-    """Rows whose size matches ``header + tail``: little-endian CDR, and a header whose frame_id
-    length (u32 at payload byte 12) puts the ``alignment``-aligned tail of ``tail`` bytes exactly
-    at the end.  Anything else is malformed for the schema and cannot be decoded."""
-    size = payloads.shape[1]
-    if size < 16:
-        return np.zeros(len(payloads), dtype=bool)
-    fid_len = np.ascontiguousarray(payloads[:, 12:16]).view("<u4")[:, 0].astype(np.int64)
-    header = 12 + fid_len  # CDR bytes before the tail, counted from the encapsulation's end
-    expected = 4 + (header + alignment - 1) // alignment * alignment + tail
-    return (payloads[:, 0] == 0) & (payloads[:, 1] == 1) & (fid_len >= 1) & (expected == size)
+@dataclass(frozen=True)
+class _CdrMessages:
+    """Well-formed little-endian CDR messages of one channel: the bytes holding them, each one's
+    first :data:`_CDR_HEAD` bytes and where its fields after the header start."""
+
+    data: np.ndarray
+    head: np.ndarray  # (n, 16) uint8
+    tail: np.ndarray  # (n,) int64: byte of ``data`` where the fields after the header start
+    log_time: np.ndarray  # (n,) int64, ns
+
+    def __len__(self) -> int:
+        return len(self.tail)
+
+    def stamps(self) -> np.ndarray:
+        """header.stamp (sec i32 @4, nanosec u32 @8 of the payload) → ns, int64."""
+        sec = self.head[:, 4:8].view("<i4")[:, 0].astype(np.int64)
+        return sec * 1_000_000_000 + self.head[:, 8:12].view("<u4")[:, 0]
+
+    def f64(self, offset: int, count: int) -> np.ndarray:
+        """``(n, count)`` float64 from byte ``offset`` of the fields after the header."""
+        return gather(self.data, self.tail + offset, 8 * count, "<f8")
+
+    def tail_bytes(self, size: int) -> np.ndarray:
+        """The first ``size`` bytes after the header, ``(n, size)`` uint8."""
+        return gather(self.data, self.tail, size)
 
 
-def _tail_f64(payloads: np.ndarray, tail: int, offset: int, count: int) -> np.ndarray:
-    start = payloads.shape[1] - tail + offset
-    return np.ascontiguousarray(payloads[:, start : start + 8 * count]).view("<f8")
+def _cdr_messages(batch: MessageBatch, alignment: int, tail: int) -> tuple[_CdrMessages, int]:
+    """The batch's well-formed messages, and how many are not: a well-formed payload is
+    little-endian CDR whose header's frame_id length (u32 at payload byte 12, NUL included) puts
+    the ``alignment``-aligned fields after it (alignment counted from the end of the 4-byte
+    encapsulation), ``tail`` bytes, exactly at the payload's end.  Anything else is malformed for
+    the schema and cannot be decoded.  The offsets are computed per message: the frame_id may
+    change length from one message to the next."""
+    offset, size, log_time = batch.offset, batch.size, batch.log_time
+    if not (long_enough := size >= _CDR_HEAD).all():
+        offset, size, log_time = offset[long_enough], size[long_enough], log_time[long_enough]
+    head = gather(batch.data, offset, _CDR_HEAD)
+    fid_len = head[:, 12:16].view("<u4")[:, 0].astype(np.int64)
+    start = 4 + (12 + fid_len + alignment - 1) // alignment * alignment
+    ok = (head[:, 0] == 0) & (head[:, 1] == 1) & (fid_len >= 1) & (start + tail == size)
+    if not ok.all():
+        head, offset, start, log_time = head[ok], offset[ok], start[ok], log_time[ok]
+    messages = _CdrMessages(batch.data, head, offset + start, log_time.astype(np.int64))
+    return messages, len(batch) - len(messages)
 
 
 _BLOCK_BYTES = 32 << 20
 """Bytes of one block a column is collected in: above glibc's largest dynamic mmap threshold
 (32 MiB on 64-bit, mallopt(3) M_MMAP_THRESHOLD), so every block is a mapping of its own whose
 untouched rows cost no memory and which returns to the OS when freed.  Collecting the runs'
-arrays themselves and concatenating them peaks at twice the column: a run holds one MCAP chunk's
+arrays themselves and concatenating them peaks at twice the column: a batch holds one MCAP chunk's
 messages (~2000 Imu messages in the 768 KiB chunks of the mcap C++ writer's DefaultChunkSize,
 which rosbag2 uses: 16 kB a column), such small arrays live on the C heap, and heap memory
 freed between live allocations stays resident (measured: 400 MB of 20 kB parts joined → RSS
@@ -122,7 +151,7 @@ freed between live allocations stays resident (measured: 400 MB of 20 kB parts j
 
 
 class _Column:
-    """One decoded column, collected run by run into :data:`_BLOCK_BYTES` blocks."""
+    """One decoded column, collected batch by batch into :data:`_BLOCK_BYTES` blocks."""
 
     def __init__(self) -> None:
         self.blocks: list[np.ndarray] = []
@@ -194,7 +223,7 @@ class _SpilledColumn:
 
 
 class _Steps:
-    """The non-increasing steps x[i + 1] <= x[i] of a series seen run by run, and whether any
+    """The non-increasing steps x[i + 1] <= x[i] of a series seen batch by batch, and whether any
     value is non-zero."""
 
     def __init__(self) -> None:
@@ -214,7 +243,7 @@ _TIMES = ("stamp_ns", "log_time_ns")
 
 
 class _Columns:
-    """Accumulates decoded column arrays of one channel, run by run, in memory or (``spill``,
+    """Accumulates decoded column arrays of one channel, batch by batch, in memory or (``spill``,
     a directory) in files; the two candidate time bases are also followed by :class:`_Steps`,
     and not kept when named in ``skip``."""
 
@@ -255,13 +284,13 @@ _RAIL = (1 << 13) - 1
 """ADIS16364 14-bit full scale: the inertial outputs saturate at -8192..8191 counts."""
 
 
-def _decode_adis_run(run: MessageRun, out: _Columns, columns: frozenset[str] | None) -> None:
-    """Decode an ADIS16364 run into the columns ``columns`` needs (None: all of them).
+def _decode_adis(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) -> None:
+    """Decode ADIS16364 frames into the columns ``columns`` needs (None: all of them).
 
-    The burst words are decoded run by run and kept as integer counts (an axis costs 2 bytes
+    The burst words are decoded batch by batch and kept as integer counts (an axis costs 2 bytes
     a frame until :func:`_adis_frame` scales it): the (n, 11) words of a whole recording are
     never held.  Stamps are kept only for ``t_s`` / ``stamp_ns``."""
-    block = decode_frames(run.payloads)
+    block = decode_frames(np.hstack([m.head, m.tail_bytes(TAIL_SIZE)]))
     counts, new_data, alarm = adis.decode_burst(block.burst)
 
     def wanted(*names: str) -> bool:
@@ -270,7 +299,7 @@ def _decode_adis_run(run: MessageRun, out: _Columns, columns: frozenset[str] | N
     if wanted("t_s", "stamp_ns"):
         out.add(stamp_ns=block.stamp_ns)
     if wanted("t_s"):
-        out.add(log_time_ns=run.log_time)
+        out.add(log_time_ns=m.log_time)
     out.add(**{name: counts[1 + i] for i, name in enumerate(AXES) if wanted(name)})
     if wanted("temp_c"):  # the three TEMP words (one per gyro)
         out.add(temp_c=counts[7:10].sum(axis=0, dtype=np.int32))
@@ -289,40 +318,35 @@ def _decode_adis_run(run: MessageRun, out: _Columns, columns: frozenset[str] | N
         out.add(diag_stat=block.diag_stat)
 
 
-def _decode_imu_run(run: MessageRun, out: _Columns, columns: frozenset[str] | None) -> None:
-    """Decode the fields of an Imu run that ``columns`` needs (None: all of them).
+def _decode_imu(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) -> None:
+    """Decode the fields of Imu messages that ``columns`` needs (None: all of them).
 
     A subset keeps the stamps only for ``t_s`` / ``stamp_ns`` / ``temp_c`` (interpolated on the
     stamps), each axis only when named, and ``nonfinite`` (any axis NaN/inf, 1 byte per frame)
     instead of the axes for conditioning."""
-    p = run.payloads
     if columns is None:
         out.add(
-            stamp_ns=_stamps(p),
-            log_time_ns=run.log_time,
-            gyro=_tail_f64(p, _IMU_TAIL, _IMU_GYRO, 3),
-            accel=_tail_f64(p, _IMU_TAIL, _IMU_ACCEL, 3),
+            stamp_ns=m.stamps(),
+            log_time_ns=m.log_time,
+            gyro=m.f64(_IMU_GYRO, 3),
+            accel=m.f64(_IMU_ACCEL, 3),
         )
         return
     if columns & {"t_s", "stamp_ns", "temp_c"}:
-        out.add(stamp_ns=_stamps(p))
+        out.add(stamp_ns=m.stamps())
     if "t_s" in columns:
-        out.add(log_time_ns=run.log_time)
+        out.add(log_time_ns=m.log_time)
     if "nonfinite" in columns:
-        gyro = _tail_f64(p, _IMU_TAIL, _IMU_GYRO, 3)
-        accel = _tail_f64(p, _IMU_TAIL, _IMU_ACCEL, 3)
+        gyro, accel = m.f64(_IMU_GYRO, 3), m.f64(_IMU_ACCEL, 3)
         out.add(nonfinite=~(np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)))
     for i, name in enumerate(AXES):
         if name in columns:
             start = _IMU_GYRO + 8 * i if i < 3 else _IMU_ACCEL + 8 * (i - 3)
-            out.add(**{name: _tail_f64(p, _IMU_TAIL, start, 1)[:, 0]})
+            out.add(**{name: m.f64(start, 1)[:, 0]})
 
 
-def _decode_temperature_run(run: MessageRun, out: _Columns) -> None:
-    out.add(
-        stamp_ns=_stamps(run.payloads),
-        temp_c=_tail_f64(run.payloads, 16, 0, 1)[:, 0],
-    )
+def _decode_temperature(m: _CdrMessages, out: _Columns) -> None:
+    out.add(stamp_ns=m.stamps(), temp_c=m.f64(0, 1)[:, 0])
 
 
 def _adis_frame(
@@ -628,9 +652,9 @@ def scan(
     warnings: list[str] = []
     done = 0
     layouts = {  # kind: (decoder, alignment of the fields after the header, their size in bytes)
-        "adis16364": (lambda run, out: _decode_adis_run(run, out, columns), 4, TAIL_SIZE),
-        "imu": (lambda run, out: _decode_imu_run(run, out, columns), 8, _IMU_TAIL),
-        "temperature": (_decode_temperature_run, 8, 16),
+        "adis16364": (lambda m, out: _decode_adis(m, out, columns), 4, TAIL_SIZE),
+        "imu": (lambda m, out: _decode_imu(m, out, columns), 8, _IMU_TAIL),
+        "temperature": (_decode_temperature, 8, 16),
     }
     malformed: dict[str, int] = defaultdict(int)
     for file in files:
@@ -639,18 +663,14 @@ def scan(
             file, wanted=wanted, progress=progress and (lambda n, o=offset: progress(o + n))
         )
         report = scanner.report
-        for run in scanner.runs():
-            channel = report.channels[run.channel_id]
+        for batch in scanner.batches():
+            channel = report.channels[batch.channel_id]
             decoder, alignment, tail = layouts[kinds[report.schemas[channel.schema_id].name]]
-            ok = _well_formed(run.payloads, alignment, tail)
-            if not ok.all():
-                malformed[channel.topic] += int(np.count_nonzero(~ok))
-                run = MessageRun(run.channel_id, run.log_time[ok], run.payloads[ok])
-            if len(run.log_time):
-                decoder(
-                    MessageRun(run.channel_id, run.log_time.astype(np.int64), run.payloads),
-                    channels[channel.topic],
-                )
+            messages, bad = _cdr_messages(batch, alignment, tail)
+            if bad:
+                malformed[channel.topic] += bad
+            if len(messages):
+                decoder(messages, channels[channel.topic])
         done += report.file_bytes
         metadata.update(report.metadata)
         prefix = f"{file.name}: " if len(files) > 1 else ""

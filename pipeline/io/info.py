@@ -77,10 +77,10 @@ def describe(path: Path) -> RecordingInfo:
     for file in files:
         scanner = McapScanner(file)
         report = scanner.report
-        for run in scanner.runs():
-            info = _topic(topics, report, run.channel_id)
-            info.messages += len(run.log_time)
-            lo, hi = int(np.min(run.log_time)), int(np.max(run.log_time))
+        for batch in scanner.batches():
+            info = _topic(topics, report, batch.channel_id)
+            info.messages += len(batch)
+            lo, hi = int(np.min(batch.log_time)), int(np.max(batch.log_time))
             info.start_ns = lo if info.start_ns is None else min(info.start_ns, lo)
             info.end_ns = hi if info.end_ns is None else max(info.end_ns, hi)
         for channel_id in report.channels:  # channels without readable messages too

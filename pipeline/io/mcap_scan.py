@@ -1,12 +1,14 @@
-"""Tolerant linear scan of an MCAP file, yielding runs of messages as numpy arrays.
+"""Tolerant linear scan of an MCAP file, yielding each chunk's messages as index arrays.
 
 The mcap library's indexed reader needs an intact summary section and its per-message reader
 runs ~100 k messages/s in Python.  This scanner walks the file record by record (MCAP spec:
-``opcode u8, length u64, body``), parses Schema, Channel, Metadata and Chunk bodies with the mcap
-library's own record classes, decompresses each chunk, and cuts its body into *runs* of
-consecutive Message records of equal size, which become one ``(n, size)`` uint8 array each
-(a strided view: no per-message Python).  Messages whose sizes vary still decode, one run per
-message, just slower.
+``opcode u8, length u64, body``), parses Schema, Channel and Metadata bodies with the mcap
+library's own record classes (Chunk bodies into its :class:`Chunk`, without copying the
+compressed records), decompresses each chunk and indexes its Message records with a
+compiled walk (:mod:`imupipe.io.mcap_walk`), on a worker thread while the previous chunk is
+decoded.  A chunk's messages of each wanted channel become one :class:`MessageBatch` (payload
+offsets into the decompressed chunk), however the channels interleave.  Top-level Message
+records (unchunked files) are read in blocks and indexed the same way.
 
 Damage is survived and reported, never hidden: a file cut mid-record keeps every complete record
 before the cut (and, when the cut falls inside a chunk, reads that chunk's header to tell what was
@@ -17,6 +19,7 @@ range; a record whose fields do not parse is skipped and counted.  See :class:`S
 from __future__ import annotations
 
 import io
+import itertools
 import os
 import struct
 import zlib
@@ -25,6 +28,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 import lz4.frame
 import numpy as np
@@ -35,18 +39,53 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
 from imupipe.errors import InputError, NotMcapError
+from imupipe.io.mcap_walk import MESSAGE_HEAD, RECORD_HEAD, MessageIndex, gather, index_messages
 
 MAGIC = b"\x89MCAP0\r\n"
-_RECORD_HEAD = 9  # opcode u8 + length u64
-_MESSAGE_FIXED = 2 + 4 + 8 + 8  # channel_id, sequence, log_time, publish_time
-_MESSAGE_HEAD = _RECORD_HEAD + _MESSAGE_FIXED  # bytes of a Message record before its data
 _CHUNK_FIXED = 8 + 8 + 8  # message_start_time, message_end_time, uncompressed_size
-PREFETCH_RECORDS = 2
-"""Records read ahead of the one being cut into runs; chunks among them are decompressed and
-CRC-checked on a worker thread meanwhile (zstd, lz4 and crc32 release the GIL)."""
+UNPACK_THREADS = 2
+PREFETCH_RECORDS = 4
+"""Records read ahead of the one being decoded; chunks among them are decompressed, CRC-checked
+and indexed on :data:`UNPACK_THREADS` worker threads meanwhile (zstd, lz4, crc32 and the walk
+release the GIL): on a busy bag unpacking costs about twice the decoding."""
+MESSAGE_BLOCK = (64 << 10, 4 << 20)
+"""Least and most bytes read at once where top-level Message records follow each other (an
+unchunked file): they are indexed by one compiled walk, not parsed one by one.  The block
+doubles while the messages fill it and falls back to the least when they do not, so a file
+that alternates messages with other records costs no more than reading it."""
 _PARSED = (Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA)
 _MALFORMED = (McapError, UnicodeDecodeError, struct.error, ValueError, OverflowError)
 """What the mcap library's record parsers raise on bytes that are not a valid record."""
+
+
+@dataclass(frozen=True)
+class MessageBatch:
+    """Messages of one channel from one chunk (or one block of top-level records), in file
+    order, as offsets into the bytes that hold them.
+
+    Attributes:
+        channel_id: the MCAP channel.
+        log_time: ns since the epoch (uint64, ``(n,)``).
+        data: uint8, the decompressed chunk (or block) holding the payloads.
+        offset: int64 ``(n,)``, where each payload (the serialised message) starts in ``data``.
+        size: int64 ``(n,)``, payload bytes.
+    """
+
+    channel_id: int
+    log_time: np.ndarray
+    data: np.ndarray
+    offset: np.ndarray
+    size: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.offset)
+
+    def runs(self) -> Iterator[MessageRun]:
+        """The batch as runs of consecutive messages of equal size (payloads copied)."""
+        cuts = [0, *(np.flatnonzero(np.diff(self.size)) + 1).tolist(), len(self)]
+        for a, b in itertools.pairwise(cuts):
+            payloads = gather(self.data, self.offset[a:b], int(self.size[a]))
+            yield MessageRun(self.channel_id, self.log_time[a:b], payloads)
 
 
 @dataclass(frozen=True)
@@ -57,9 +96,6 @@ class MessageRun:
         channel_id: the MCAP channel.
         log_time: ns since the epoch (uint64, ``(n,)``).
         payloads: ``(n, size)`` uint8, the serialised messages.
-
-    Both may be strided read-only views of the decompressed chunk (valid as long as the run is
-    referenced).
     """
 
     channel_id: int
@@ -67,18 +103,12 @@ class MessageRun:
     payloads: np.ndarray
 
 
-def _message_dtype(size: int) -> np.dtype:
-    """A Message record of ``size`` bytes as a structured dtype (MCAP spec: opcode u8,
-    length u64, channel_id u16, sequence u32, log_time u64, publish_time u64, data): read over a
-    decompressed chunk, its fields are strided views of the bytes, not copies."""
-    return np.dtype(
-        {
-            "names": ["opcode", "length", "channel_id", "log_time"],
-            "formats": ["u1", "<u8", "<u2", "<u8"],
-            "offsets": [0, 1, _RECORD_HEAD, _RECORD_HEAD + 2 + 4],
-            "itemsize": size,
-        }
-    )
+@dataclass(frozen=True)
+class _Block:
+    """Top-level Message records read at once, and their index."""
+
+    data: np.ndarray
+    index: MessageIndex
 
 
 def _opcode_name(opcode: int) -> str:
@@ -187,17 +217,46 @@ def _decompress(chunk: Chunk) -> bytes:
     raise InputError(f"unsupported compression {chunk.compression!r}")
 
 
-def _unpack(body: bytes) -> tuple[Chunk, bytes, str]:
-    """Parse a Chunk record, decompress it and check its CRC: (chunk, records, reason), the
-    reason why it cannot be read, empty if it can."""
-    chunk = _parse(Chunk, body)
+_CHUNK_HEAD = struct.Struct("<QQQII")
+"""A Chunk record's fields before ``records`` (MCAP spec: message_start_time u64,
+message_end_time u64, uncompressed_size u64, uncompressed_crc u32, compression string: u32
+length + UTF-8)."""
+
+
+def _parse_chunk(body: bytes) -> Chunk:
+    """The mcap library's :class:`Chunk` of a record body, its ``data`` a view of ``body``:
+    ``Chunk.read`` copies the compressed records (a camera bag's whole size once more)."""
+    view = memoryview(body)
+    start, end, size, crc, name_len = _CHUNK_HEAD.unpack_from(view)
+    at = _CHUNK_HEAD.size + name_len
+    compression = str(view[_CHUNK_HEAD.size : at], "utf-8")
+    (records_len,) = struct.unpack_from("<Q", view, at)
+    data = view[at + 8 : at + 8 + records_len]
+    if len(data) != records_len:
+        raise ValueError("chunk records run past the record's end")
+    return Chunk(
+        message_start_time=start,
+        message_end_time=end,
+        uncompressed_size=size,
+        uncompressed_crc=crc,
+        compression=compression,
+        data=data,
+    )
+
+
+def _unpack(body: bytes) -> tuple[Chunk, np.ndarray, str, MessageIndex | None]:
+    """Parse a Chunk record, decompress it, check its CRC and index its leading Message
+    records: (chunk, records, reason, index), the reason why it cannot be read (empty if it
+    can; then no index)."""
+    chunk = _parse_chunk(body)
     try:
         data = _decompress(chunk)
     except Exception as exc:  # each codec raises its own error types
-        return chunk, b"", f"decompression failed: {exc}"
+        return chunk, np.empty(0, np.uint8), f"decompression failed: {exc}", None
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
-        return chunk, data, "CRC mismatch"
-    return chunk, data, ""
+        return chunk, np.empty(0, np.uint8), "CRC mismatch", None
+    buf = np.frombuffer(data, np.uint8)
+    return chunk, buf, "", index_messages(buf)
 
 
 def _parse(record_type, body: bytes, length: int | None = None):
@@ -224,19 +283,27 @@ class McapScanner:
         self.path = Path(path)
         self.report = ScanReport(file_bytes=os.path.getsize(self.path))
         self._wanted = wanted
-        self._wanted_ids: set[int] = set()
+        self._wanted_ids = np.zeros(1 << 16, bool)  # by channel id (u16)
         self._progress = progress or (lambda n: None)
         self._cut_head: bytes | None = None  # fixed fields of a chunk cut off by the file's end
+        self._block_bytes = MESSAGE_BLOCK[0]
 
     def _add_channel(self, channel: Channel) -> None:
         self.report.channels[channel.id] = channel
-        if self._wanted(channel, self.report.schemas.get(channel.schema_id)):
-            self._wanted_ids.add(channel.id)
+        wanted = self._wanted(channel, self.report.schemas.get(channel.schema_id))
+        self._wanted_ids[channel.id] = bool(wanted)
 
     def runs(self) -> Iterator[MessageRun]:
-        """The file's message runs in file order; chunks are unpacked a few records ahead."""
-        with ThreadPoolExecutor(1, thread_name_prefix="mcap-unpack") as pool:
-            pending: deque[tuple[int, bytes | Future, int]] = deque()
+        """The file's messages as runs of equal payload size, in file order (the payloads are
+        copied: :meth:`batches` is the fast way)."""
+        for batch in self.batches():
+            yield from batch.runs()
+
+    def batches(self) -> Iterator[MessageBatch]:
+        """The wanted channels' messages, one batch per channel and chunk, in file order;
+        chunks are unpacked a few records ahead."""
+        with ThreadPoolExecutor(UNPACK_THREADS, thread_name_prefix="mcap-unpack") as pool:
+            pending: deque[tuple[int, bytes | _Block | Future, int]] = deque()
             for opcode, body, length in self._records():
                 pending.append(
                     (opcode, pool.submit(_unpack, body) if opcode == Opcode.CHUNK else body, length)
@@ -248,37 +315,67 @@ class McapScanner:
         if self._cut_head is not None:
             self._cut_chunk(self._cut_head)
 
-    def _records(self) -> Iterator[tuple[int, bytes, int]]:
-        """(opcode, body, length) of each top-level record the scan parses, in file order;
-        fills the report's truncation, footer and bytes-read fields."""
+    def _records(self) -> Iterator[tuple[int, bytes | _Block, int]]:
+        """(opcode, body, length) of each top-level record the scan parses, in file order (a
+        :class:`_Block` for consecutive Message records); fills the report's truncation, footer
+        and bytes-read fields."""
         report = self.report
         with open(self.path, "rb") as f:
             if f.read(len(MAGIC)) != MAGIC:
                 raise NotMcapError(f"{self.path} is not an MCAP file (bad magic)")
             pos = len(MAGIC)
             while True:
-                head = f.read(_RECORD_HEAD)
+                head = f.read(RECORD_HEAD)
                 if len(head) == 0:
                     break
-                if len(head) < _RECORD_HEAD:
+                if len(head) < RECORD_HEAD:
                     report.truncated_bytes = report.file_bytes - pos
                     break
                 opcode, length = struct.unpack("<BQ", head)
-                if pos + _RECORD_HEAD + length > report.file_bytes:
+                if pos + RECORD_HEAD + length > report.file_bytes:
                     report.truncated_bytes = report.file_bytes - pos
                     report.truncated_opcode = opcode
                     if opcode == Opcode.CHUNK:  # reported after the chunks before it
                         self._cut_head = f.read(_CHUNK_FIXED)
                     break
+                block = self._message_block(f, head, pos) if opcode == Opcode.MESSAGE else None
+                if block is not None:
+                    yield opcode, block, length
+                    pos += block.index.stop
+                    f.seek(pos)
+                    self._progress(pos)
+                    continue
                 if opcode in _PARSED:
                     yield opcode, f.read(length), length
                 else:
                     f.seek(length, os.SEEK_CUR)
-                pos += _RECORD_HEAD + length
+                pos += RECORD_HEAD + length
                 self._progress(pos)
                 if opcode == Opcode.FOOTER:  # only the closing magic follows
                     report.has_footer = True
                     break
+
+    def _message_block(self, f: BinaryIO, head: bytes, pos: int) -> _Block | None:
+        """Read a block (:data:`MESSAGE_BLOCK`; at least the whole record) from the Message
+        record at ``pos`` whose head was just read, and index the Message records that follow
+        each other there; None, the file back after the head, if the first one is malformed."""
+        length = struct.unpack_from("<Q", head, 1)[0]
+        data = bytearray(
+            min(max(self._block_bytes, RECORD_HEAD + length), self.report.file_bytes - pos)
+        )
+        data[:RECORD_HEAD] = head
+        f.readinto(memoryview(data)[RECORD_HEAD:])
+        buf = np.frombuffer(data, np.uint8)
+        buf.flags.writeable = False  # as a chunk's bytes: one compiled walk for both
+        index = index_messages(buf)
+        filled = index.stop > len(buf) // 2
+        self._block_bytes = (
+            min(2 * self._block_bytes, MESSAGE_BLOCK[1]) if filled else MESSAGE_BLOCK[0]
+        )
+        if not len(index):
+            f.seek(pos + RECORD_HEAD)
+            return None
+        return _Block(buf, index)
 
     def _cut_chunk(self, head: bytes) -> None:
         """Record what a chunk cut by the end of the file held, from its fixed header fields."""
@@ -288,7 +385,9 @@ class McapScanner:
             lost = LostChunk(*struct.unpack("<QQQ", head), "cut off by the end of the file")
         self.report.bad_chunks.append(lost)
 
-    def _record(self, opcode: int, body: bytes | Future, length: int) -> Iterator[MessageRun]:
+    def _record(
+        self, opcode: int, body: bytes | _Block | Future, length: int
+    ) -> Iterator[MessageBatch]:
         """Parse one record (a chunk's body may be the :func:`_unpack` job already submitted);
         a record whose fields do not parse is counted and skipped."""
         try:
@@ -298,8 +397,8 @@ class McapScanner:
             self.report.bad_records[kind] = self.report.bad_records.get(kind, 0) + 1
 
     def _parsed_record(
-        self, opcode: int, body: bytes | Future, length: int
-    ) -> Iterator[MessageRun]:
+        self, opcode: int, body: bytes | _Block | Future, length: int
+    ) -> Iterator[MessageBatch]:
         report = self.report
         if opcode == Opcode.SCHEMA:
             schema = _parse(Schema, body)
@@ -310,17 +409,26 @@ class McapScanner:
             meta = _parse(Metadata, body)
             report.metadata[meta.name] = dict(meta.metadata)
         elif opcode == Opcode.MESSAGE:
+            if isinstance(body, _Block):
+                yield from self._batches(body.data, body.index)
+                return
             msg = _parse(Message, body, length)
-            if msg.channel_id in self._wanted_ids:
-                report.messages += 1
-                yield MessageRun(
-                    msg.channel_id,
-                    np.array([msg.log_time], dtype=np.uint64),
-                    np.frombuffer(msg.data, np.uint8).reshape(1, -1),
-                )
+            data = np.frombuffer(msg.data, np.uint8)
+            yield from self._batches(
+                data,
+                MessageIndex(
+                    offset=np.zeros(1, np.int64),
+                    size=np.array([len(data)], np.int64),
+                    channel=np.array([msg.channel_id], np.uint16),
+                    log_time=np.array([msg.log_time], np.uint64),
+                    stop=len(data),
+                ),
+            )
         elif opcode == Opcode.CHUNK:
             report.chunks += 1
-            chunk, data, reason = body.result() if isinstance(body, Future) else _unpack(body)
+            chunk, data, reason, index = (
+                body.result() if isinstance(body, Future) else _unpack(body)
+            )
             if reason:
                 report.bad_chunks.append(
                     LostChunk(
@@ -331,18 +439,42 @@ class McapScanner:
                     )
                 )
                 return
-            yield from self._chunk_runs(np.frombuffer(data, np.uint8), chunk)
+            yield from self._chunk_batches(data, chunk, index)
 
-    def _chunk_runs(self, buf: np.ndarray, chunk: Chunk) -> Iterator[MessageRun]:
-        """Cut a decompressed chunk body into runs of equal-size Message records."""
-        pos, end = 0, len(buf)
-        while pos + _RECORD_HEAD <= end:
+    def _batches(self, data: np.ndarray, index: MessageIndex) -> Iterator[MessageBatch]:
+        """The indexed messages of wanted channels, one batch per channel."""
+        channel = index.channel
+        wanted = self._wanted_ids[channel]
+        count = int(np.count_nonzero(wanted))
+        if count == 0:
+            return
+        self.report.messages += count
+        first = int(channel[0])
+        if count == len(index) and (channel == first).all():  # one channel: no copies
+            yield MessageBatch(first, index.log_time, data, index.offset, index.size)
+            return
+        for cid in np.unique(channel[wanted]).tolist():
+            sel = channel == cid
+            yield MessageBatch(cid, index.log_time[sel], data, index.offset[sel], index.size[sel])
+
+    def _chunk_batches(
+        self, buf: np.ndarray, chunk: Chunk, index: MessageIndex
+    ) -> Iterator[MessageBatch]:
+        """The batches of a decompressed chunk whose leading Message records are ``index``;
+        a Schema or Channel record among them is parsed where it stands and the walk resumes
+        after it."""
+        report, end = self.report, len(buf)
+        while True:
+            report.message_records += len(index)
+            report.message_record_bytes += int(index.size.sum()) + MESSAGE_HEAD * len(index)
+            yield from self._batches(buf, index)
+            pos = index.stop
+            if end - pos < RECORD_HEAD:
+                return
             opcode = int(buf[pos])
-            length = int(buf[pos + 1 : pos + 9].view("<u8")[0])
-            size = _RECORD_HEAD + length
-            malformed = pos + size > end or (opcode == Opcode.MESSAGE and length < _MESSAGE_FIXED)
-            if malformed:
-                self.report.bad_chunks.append(
+            size = RECORD_HEAD + int(buf[pos + 1 : pos + RECORD_HEAD].view("<u8")[0])
+            if pos + size > end or opcode == Opcode.MESSAGE:  # the walk stops at no good Message
+                report.bad_chunks.append(
                     LostChunk(
                         chunk.message_start_time,
                         chunk.message_end_time,
@@ -351,30 +483,7 @@ class McapScanner:
                     )
                 )
                 return
-            if opcode != Opcode.MESSAGE:
-                yield from self._record(
-                    opcode, buf[pos + _RECORD_HEAD : pos + size].tobytes(), length
-                )
-                pos += size
-                continue
-            count = (end - pos) // size
-            records = np.frombuffer(buf, _message_dtype(size), count, pos)
-            same = (records["opcode"] == Opcode.MESSAGE) & (records["length"] == length)
-            run = count if same.all() else int(np.argmin(same))
-            records = records[:run]
-            payloads = buf[pos : pos + run * size].reshape(run, size)[:, _MESSAGE_HEAD:]
-            pos += run * size
-            self.report.message_records += run
-            self.report.message_record_bytes += run * size
-            channel, log_time = records["channel_id"], records["log_time"]
-            if (channel == channel[0]).all():  # the usual case: views, no copies
-                if int(channel[0]) in self._wanted_ids:
-                    self.report.messages += run
-                    yield MessageRun(int(channel[0]), log_time, payloads)
-                continue
-            for cid in np.unique(channel):
-                if int(cid) not in self._wanted_ids:
-                    continue
-                sel = channel == cid
-                self.report.messages += int(sel.sum())
-                yield MessageRun(int(cid), log_time[sel], payloads[sel])
+            yield from self._record(
+                opcode, buf[pos + RECORD_HEAD : pos + size].tobytes(), size - RECORD_HEAD
+            )
+            index = index_messages(buf, pos + size)

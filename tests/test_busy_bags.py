@@ -1,0 +1,222 @@
+"""Bags as robots record them (issue 10): IMU messages interleaved one by one with other topics,
+several IMU channels, a frame_id whose length changes per message, written by OTHER libraries
+(the mcap library's Writer, rosbags' rosbag2 writer), lz4/zstd/none, chunked and unchunked.
+
+The decoded values must equal rosbags' deserialisation of the same file BIT FOR BIT (NaN
+payloads, -0.0, subnormals included): the reference reads the file with the mcap library's
+reader and decodes each message with rosbags' CDR deserialiser, neither of them our code.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Rosbag2Writer
+from rosbags.typesys import get_types_from_msg
+
+from imupipe.device import adis16364 as adis
+from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, message_definition
+from imupipe.io.decode import IMU_SCHEMA, decode
+from imupipe.io.mcap_scan import McapScanner
+from imupipe.testing.busy_bag import (
+    AWKWARD,
+    TYPESTORE,
+    adis_stream,
+    imu_stream,
+    other_streams,
+    write_bag,
+)
+from imupipe.units import RAD_PER_DEG
+from imupipe.vocab import AXES
+
+TOPICS = ("/imu0/data", "/imu1/data")
+SECONDS = 1.5
+
+
+def rosbags_imu(path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps ns int64, (n, 6) gyro+accel float64) of ``topic`` as rosbags decodes them."""
+    stamps, axes = [], []
+    with open(path, "rb") as f:
+        for _, _, message in make_reader(f).iter_messages(topics=[topic]):
+            msg = TYPESTORE.deserialize_cdr(message.data, IMU_SCHEMA)
+            w, a = msg.angular_velocity, msg.linear_acceleration
+            stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+            axes.append([w.x, w.y, w.z, a.x, a.y, a.z])
+    return np.array(stamps, np.int64), np.array(axes, np.float64)
+
+
+def longest_run(path: Path) -> int:
+    """The longest run of consecutive messages of one channel in the file."""
+    with open(path, "rb") as f:
+        channels = [m.channel_id for _, _, m in make_reader(f).iter_messages(log_time_order=False)]
+    cuts = np.flatnonzero(np.diff(channels)) + 1
+    return int(np.diff([0, *cuts.tolist(), len(channels)]).max())
+
+
+def assert_bits_equal(ours: np.ndarray, reference: np.ndarray) -> None:
+    assert ours.shape == reference.shape
+    np.testing.assert_array_equal(ours.view(np.uint64), reference.view(np.uint64))
+
+
+@pytest.fixture(scope="module")
+def streams():
+    imus = [imu_stream(t, SECONDS, 200 + 100 * k, seed=k) for k, t in enumerate(TOPICS)]
+    return [*imus, *other_streams(SECONDS, camera=True, seed=7)]
+
+
+@pytest.mark.parametrize("chunked", [True, False], ids=["chunked", "unchunked"])
+@pytest.mark.parametrize("compression", ["zstd", "lz4", ""])
+def test_interleaved_imu_equals_rosbags_bit_for_bit(
+    tmp_path: Path, streams, compression: str, chunked: bool
+) -> None:
+    path = tmp_path / "busy.mcap"
+    # chunks of 16 kB: ~25 chunks, a camera image alone fills one
+    write_bag(path, streams, compression if chunked else "", chunked, chunk_size=16_000)
+    assert longest_run(path) <= 2  # runs of one: the IMUs alternate with each other and /tf
+    for topic in TOPICS:
+        rec = decode(path, topic=topic)
+        stamps, axes = rosbags_imu(path, topic)
+        assert rec.frames.height == len(stamps) > 0 and not rec.warnings
+        np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
+        assert_bits_equal(rec.frames.select(AXES).to_numpy(), axes)
+        assert np.isin(AWKWARD.view(np.uint64), axes.view(np.uint64)).all()  # all were read
+        # the sibling temperature (10 Hz, 25 °C ± 0.1) interpolated on the IMU stamps
+        assert abs(rec.frames["temp_c"].mean() - 25) < 0.2
+
+
+def test_sizes_vary_and_batches_are_exact(tmp_path: Path, streams) -> None:
+    """The fixture really varies the payload size (every frame_id of FRAME_IDS, CDR padding
+    0-7 bytes), and the scanner's batches give each message's bytes exactly."""
+    path = tmp_path / "busy.mcap"
+    write_bag(path, streams, "lz4", chunk_size=16_000)
+    with open(path, "rb") as f:
+        reference = [(c.topic, m.log_time, m.data) for _, c, m in make_reader(f).iter_messages()]
+    scanner = McapScanner(path)
+    ours = []
+    for batch in scanner.batches():
+        topic = scanner.report.channels[batch.channel_id].topic
+        for t, o, s in zip(batch.log_time, batch.offset, batch.size, strict=True):
+            ours.append((topic, int(t), batch.data[o : o + s].tobytes()))
+    assert sorted(ours) == sorted(reference)
+    sizes = {len(d) for topic, _, d in reference if topic == TOPICS[0]}
+    # header 16 bytes + frame_id "", "ab", "imu" (+3, 1, 0 bytes of padding), "imu_link",
+    # "base_imu_link_", the 30-character one, then the 296 bytes of the fields after it
+    assert sizes == {316, 324, 332, 348}
+    channels = scanner.report.channels
+    from_runs = [
+        (channels[run.channel_id].topic, int(t), p.tobytes())
+        for run in McapScanner(path).runs()
+        for t, p in zip(run.log_time, run.payloads, strict=True)
+    ]
+    assert sorted(from_runs) == sorted(reference)
+
+
+def test_channel_registered_mid_chunk(tmp_path: Path) -> None:
+    """A Channel record between Message records of a chunk (a topic that appears later) is
+    parsed where it stands and the walk resumes after it."""
+    imu0, imu1 = (imu_stream(t, 0.5, 200, seed=k) for k, t in enumerate(TOPICS))
+    buf = io.BytesIO()
+    w = Writer(buf, chunk_size=1 << 20)
+    w.start(profile="ros2", library="test")
+    text = TYPESTORE.generate_msgdef(IMU_SCHEMA, ros_version=2)[0].encode()
+    sid = w.register_schema(IMU_SCHEMA, "ros2msg", text)
+    first = w.register_channel(TOPICS[0], "cdr", sid)
+    for i in range(50):
+        w.add_message(first, int(imu0.log_time[i]), imu0.payloads[i], int(imu0.log_time[i]))
+    second = w.register_channel(TOPICS[1], "cdr", sid)
+    for i in range(50, 100):
+        for cid, s in ((first, imu0), (second, imu1)):
+            w.add_message(cid, int(s.log_time[i]), s.payloads[i], int(s.log_time[i]))
+    w.finish()
+    path = tmp_path / "late.mcap"
+    path.write_bytes(buf.getvalue())
+    scanner = McapScanner(path)
+    counts = {}
+    for batch in scanner.batches():
+        counts[batch.channel_id] = counts.get(batch.channel_id, 0) + len(batch)
+    assert scanner.report.chunks == 1 and counts == {first: 100, second: 50}
+    for topic in TOPICS:
+        stamps, axes = rosbags_imu(path, topic)
+        rec = decode(path, topic=topic)
+        np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
+        assert_bits_equal(rec.frames.select(AXES).to_numpy(), axes)
+
+
+@pytest.mark.parametrize("compression", ["zstd", ""])
+def test_interleaved_adis_frames_equal_rosbags(tmp_path: Path, compression: str) -> None:
+    """Our ADIS16364 frames interleaved 1:1 with /tf, frame_id varying: stamps, counters and
+    DIAG_STAT as rosbags reads them (from the schema text in the file), and the axes are those
+    words in SI units."""
+    frames = adis_stream(TOPICS[0], 3.0, 100, seed=4)
+    tf = other_streams(3.0, camera=False, seed=5)[0]
+    device = adis.DeviceConfig()
+    path = tmp_path / "adis.mcap"
+    meta = {METADATA_NAME: device.to_metadata()}
+    write_bag(path, [frames, tf], compression, chunk_size=8_000, metadata=meta)
+    assert longest_run(path) <= 2
+    TYPESTORE.register(get_types_from_msg(message_definition(), SCHEMA_NAME))
+    with open(path, "rb") as file:
+        messages = make_reader(file).iter_messages(topics=[TOPICS[0]])
+        ref = [TYPESTORE.deserialize_cdr(m.data, SCHEMA_NAME) for _, _, m in messages]
+    f = decode(path).frames
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in ref]
+    np.testing.assert_array_equal(f["stamp_ns"].to_numpy(), stamps)
+    np.testing.assert_array_equal(f["counter"].to_numpy(), [m.frame_counter for m in ref])
+    np.testing.assert_array_equal(f["diag_stat"].to_numpy(), [m.diag_stat for m in ref])
+    fields = [word.lower() for word in adis.BURST_WORDS]  # the .msg names the registers
+    words = np.array([[getattr(m, w) for w in fields] for m in ref], np.uint16)
+    counts, new_data, _ = adis.decode_burst(words)
+    gyro_scale = device.gyro_scale_dps * RAD_PER_DEG
+    np.testing.assert_array_equal(f["gyro_x"].to_numpy(), counts[1] * gyro_scale)
+    np.testing.assert_array_equal(f["flag_nd"].to_numpy(), new_data)
+
+
+def test_rosbags_writer_bag(tmp_path: Path, streams) -> None:
+    """The same topics written by rosbags' rosbag2 MCAP writer (its own chunking), read as the
+    rosbag2 directory."""
+    bag = tmp_path / "bag"
+    with Rosbag2Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connections = [
+            writer.add_connection(s.topic, s.msgtype, typestore=TYPESTORE) for s in streams
+        ]
+        arrivals = sorted(
+            (t, k, i) for k, s in enumerate(streams) for i, t in enumerate(s.log_time.tolist())
+        )
+        for t, k, i in arrivals:
+            writer.write(connections[k], t, streams[k].payloads[i])
+    path = next(bag.glob("*.mcap"))
+    assert longest_run(path) <= 2
+    for topic in TOPICS:
+        rec = decode(bag, topic=topic)
+        stamps, axes = rosbags_imu(path, topic)
+        np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
+        assert_bits_equal(rec.frames.select(AXES).to_numpy(), axes)
+
+
+def test_unchunked_messages_between_other_records(tmp_path: Path) -> None:
+    """Top-level Message records (an unchunked file) read in blocks: stretches of messages
+    broken by attachments, the blocks growing and shrinking, every message read once."""
+    imu = imu_stream(TOPICS[0], 2.0, 200, seed=3)
+    buf = io.BytesIO()
+    w = Writer(buf, use_chunking=False)
+    w.start(profile="ros2", library="test")
+    text = TYPESTORE.generate_msgdef(IMU_SCHEMA, ros_version=2)[0].encode()
+    cid = w.register_channel(TOPICS[0], "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", text))
+    for i, t in enumerate(imu.log_time.tolist()):
+        w.add_message(cid, t, imu.payloads[i], t)
+        if i % 97 in (0, 1, 5):  # stretches of 1, 4 and 92 messages
+            w.add_attachment(create_time=t, log_time=t, name="a", media_type="x", data=b"z" * i)
+    w.finish()
+    path = tmp_path / "unchunked.mcap"
+    path.write_bytes(buf.getvalue())
+    rec = decode(path)
+    stamps, axes = rosbags_imu(path, TOPICS[0])
+    assert rec.frames.height == len(imu.log_time) == len(stamps)
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
+    assert_bits_equal(rec.frames.select(AXES).to_numpy(), axes)
