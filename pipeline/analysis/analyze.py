@@ -11,12 +11,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING
 
 import numpy as np
 import polars as pl
 
-from imupipe.analysis.condition import ConditionedSeries, condition
+from imupipe.analysis.condition import ConditionedSeries, GapPolicy, condition
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.errors import TooFewFramesError
 from imupipe.io.decode import ImuRecording, decode, mcap_files
@@ -42,7 +42,7 @@ MIN_FRAMES = 16
 class AnalyzeOptions:
     topic: str | None = None
     taus_per_decade: int = 10
-    gaps: Literal["longest", "fail"] = "longest"
+    gaps: GapPolicy = "longest"
     loop: bool = True
     rrd: bool = True
     figures: bool = True
@@ -78,20 +78,23 @@ def axis_result(
     temp_d: np.ndarray | None,
     supply_d: np.ndarray | None,
     loop: bool,
+    excluded: np.ndarray | None = None,
 ) -> AxisResult:
     """Stage 4 (+ loop) of one axis: mean, rms, IEEE 952 terms and the closed loop
     (``temp_d``, ``supply_d``: the segment's temperature and supply as
-    :func:`imupipe.model.loop.aux_block_means`)."""
+    :func:`imupipe.model.loop.aux_block_means`; ``excluded``: the samples masked by the
+    ``"mask"`` gap policy, left out of mean and rms too)."""
     sensor = sensor_of(name)
+    usable = None if excluded is None else ~excluded
     return AxisResult(
         name=name,
         sensor=sensor,
         unit="rad/s" if sensor == "gyro" else "m/s^2",
-        mean=float(y.mean()),
-        rms=float(y.std()),
+        mean=float(y.mean(where=usable) if usable is not None else y.mean()),
+        rms=float(y.std(where=usable) if usable is not None else y.std()),
         curve=curve,
         terms=fit_noise_terms(curve, sensor),
-        loop=close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d), curve)
+        loop=close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d, excluded), curve)
         if loop
         else None,
     )
@@ -102,7 +105,7 @@ def input_summary(rec: ImuRecording, series: ConditionedSeries, n: int) -> Input
     return InputSummary(
         path=str(rec.path),
         topic=rec.topic,
-        frames=n,
+        frames=n if series.excluded is None else series.usable_samples,
         rate_hz=series.rate_hz,
         duration_s=n * series.tau0_s,
         segments=[s.as_dict() for s in series.segments],
@@ -119,22 +122,25 @@ def analyze_series(
     options: AnalyzeOptions,
     progress: StageProgress,
 ) -> AnalysisResult:
-    """Stages 3–4 (+ loop) on the conditioned segment of a recording."""
-    n = series.frames.height
-    check_frames(rec, n)
+    """Stages 3–4 (+ loop) on the conditioned segment (or masked grid) of a recording."""
+    n = series.samples
+    check_frames(rec, series.usable_samples)
     axes = [a for a in AXES if a not in series.stuck_axes]
-    y = [series.frames[a].to_numpy() for a in axes]  # zero-copy views of the frame's columns
+    # zero-copy views of the frame's columns (policy "mask": the columns placed on the grid)
+    y = [series.on_grid(series.frames[a].to_numpy()) for a in axes]
     m = tau_factors(n, per_decade=options.taus_per_decade)
     with progress.stage("allan", len(axes), "axes") as advance:
-        curves = allan_curves(y, series.tau0_s, m)
+        curves = allan_curves(y, series.tau0_s, m, excluded=series.excluded)
         advance(len(axes))
-    temp_d = aux_block_means(housekeeping(series.frames, "temp_c"), series.tau0_s)
-    supply_d = aux_block_means(housekeeping(series.frames, "supply_v"), series.tau0_s)
+    temp_d, supply_d = (
+        aux_block_means(None if x is None else series.on_grid(x), series.tau0_s)
+        for x in (housekeeping(series.frames, c) for c in ("temp_c", "supply_v"))
+    )
     results: dict[str, AxisResult] = {}
     with progress.stage("noise fit", len(axes), "axes") as advance:
         for i, (name, curve) in enumerate(zip(axes, curves, strict=True)):
             results[name] = axis_result(
-                name, y[i], curve, series.tau0_s, temp_d, supply_d, options.loop
+                name, y[i], curve, series.tau0_s, temp_d, supply_d, options.loop, series.excluded
             )
             advance(i + 1)
     return AnalysisResult(input=input_summary(rec, series, n), axes=results, device=rec.device)

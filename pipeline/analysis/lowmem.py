@@ -166,7 +166,11 @@ def analyze_low_memory(
     with progress.stage("compile", 1, "step"):
         _load_kernels(options.loop)
     rec = decode_pass(1, "stamps", CONDITION_COLUMNS)
-    series = condition(rec, gaps=options.gaps)
+    series = condition(rec, gaps="longest" if options.gaps == "mask" else options.gaps)
+    if options.gaps == "mask":
+        series.warnings.append(
+            "low-memory path: --gaps mask is not available here; the longest clean segment is used"
+        )
     n = series.frames.height
     check_frames(rec, n)
     seg = series.segments[series.chosen]
