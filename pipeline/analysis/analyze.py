@@ -20,6 +20,7 @@ from imupipe.analysis.condition import ConditionedSeries, GapPolicy, condition
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.errors import TooFewFramesError
 from imupipe.io.decode import ImuRecording, decode, mcap_files
+from imupipe.model import effects
 from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
 from imupipe.progress import StageProgress
@@ -80,12 +81,14 @@ def axis_result(
     loop: bool,
     excluded: np.ndarray | None = None,
 ) -> AxisResult:
-    """Stage 4 (+ loop) of one axis: mean, rms, IEEE 952 terms and the closed loop
+    """Stage 4 (+ loop) of one axis: outliers excised (:func:`excise_outliers`), mean, rms,
+    IEEE 952 terms and the closed loop
     (``temp_d``, ``supply_d``: the segment's temperature and supply as
     :func:`imupipe.model.loop.aux_block_means`; ``excluded``: the samples masked by the
     ``"mask"`` gap policy, left out of mean and rms too)."""
     sensor = sensor_of(name)
     usable = None if excluded is None else ~excluded
+    y, curve, outliers = excise_outliers(y, tau0_s, curve, excluded)
     return AxisResult(
         name=name,
         sensor=sensor,
@@ -97,7 +100,52 @@ def axis_result(
         loop=close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d, excluded), curve)
         if loop
         else None,
+        outliers=outliers,
     )
+
+
+def excise_outliers(
+    y: np.ndarray, tau0_s: float, curve: AllanCurve, excluded: np.ndarray | None
+) -> tuple[np.ndarray, AllanCurve, dict | None]:
+    """Outliers (:func:`imupipe.model.effects.spike_candidate`: beyond a family-wise, LSB- and
+    tail-aware limit from the local median) replaced by their local median before the noise
+    fit and the loop, and the Allan curve recomputed without them.  Returns the series (a
+    corrected copy when any was found), its curve and what was excised (SI units), or the
+    inputs and None."""
+    found = effects.spike_candidate(y, tau0_s)
+    if found is None:
+        return y, curve, None
+    fix = found.spikes
+    y = y.copy()
+    y[fix.index] -= fix.value
+    m = np.round(curve.tau_s / tau0_s).astype(np.int64)
+    (curve,) = allan_curves([y], tau0_s, m, excluded=excluded)
+    ev = found.evidence
+    return (
+        y,
+        curve,
+        {
+            "count": int(fix.index.size),
+            "max_size": ev["max_size"],
+            "median_size": found.params["size"],
+            "limit": ev["limit"],
+            "threshold_z": ev["threshold_z"],
+            "sigma": found.params["sigma"],
+            "lsb": ev["lsb"],
+            "first_times_s": ev["first_times_s"],
+        },
+    )
+
+
+def outlier_warnings(results: dict[str, AxisResult]) -> list[str]:
+    """One warning per axis whose outliers were excised."""
+    return [
+        f"{name}: {o['count']} outlier sample(s) up to {o['max_size']:.3g} {res.unit} from the "
+        f"local median excised (limit {o['limit']:.3g} {res.unit} = {o['threshold_z']:.1f} "
+        f"sigma + LSB/2; replaced by the local median, first at {o['first_times_s'][0]:.2f} s)"
+        for name, res in results.items()
+        if (o := res.outliers) is not None
+    ]
 
 
 def input_summary(rec: ImuRecording, series: ConditionedSeries, n: int) -> InputSummary:
@@ -143,6 +191,7 @@ def analyze_series(
                 name, y[i], curve, series.tau0_s, temp_d, supply_d, options.loop, series.excluded
             )
             advance(i + 1)
+    series.warnings.extend(outlier_warnings(results))
     return AnalysisResult(input=input_summary(rec, series, n), axes=results, device=rec.device)
 
 

@@ -33,6 +33,7 @@ from imupipe.analysis.analyze import (
     check_frames,
     housekeeping,
     input_summary,
+    outlier_warnings,
     write_outputs,
 )
 from imupipe.analysis.condition import Segment, condition, is_stuck, stuck_warning
@@ -209,6 +210,7 @@ def analyze_low_memory(
             f"recording.rrd shows the raw signals as a min/max envelope of {ENVELOPE_BINS} bins "
             f"({-(-n // ENVELOPE_BINS)} samples each) (low-memory path)"
         )
+    series.warnings.extend(outlier_warnings(results))
     out_dir.mkdir(parents=True, exist_ok=True)
     rrd = RrdWriter(out_dir / "recording.rrd", pl.DataFrame(shown)) if options.rrd else None
     result = AnalysisResult(input=input_summary(rec, series, n), axes=results, device=rec.device)
