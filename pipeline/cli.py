@@ -36,6 +36,7 @@ class Source(StrEnum):
 class GapPolicy(StrEnum):
     longest = "longest"
     fail = "fail"
+    mask = "mask"
 
 
 ALL_TOPICS = "all"
@@ -132,7 +133,11 @@ def analyze(
     ] = None,
     taus_per_decade: Annotated[int, typer.Option(min=4, max=100)] = 10,
     gaps: Annotated[
-        GapPolicy, typer.Option(help="longest: analyse the longest clean segment; fail: refuse.")
+        GapPolicy,
+        typer.Option(
+            help="longest: analyse the longest clean segment; fail: refuse; mask: analyse the "
+            "whole recording, skipping the Allan terms that touch a gap or bad frame."
+        ),
     ] = GapPolicy.longest,
     rrd: Annotated[bool, typer.Option(help="Write recording.rrd for the Rerun viewer.")] = True,
     loop: Annotated[bool, typer.Option(help="Run the closed-loop effect search.")] = True,

@@ -143,3 +143,79 @@ def test_sparse_correction_equals_corrected_copy():
     np.testing.assert_array_equal(half.index, [0, 14_999])
     with pytest.raises(ValueError, match="one 1-D"):
         oadev(np.column_stack([y, y]), 0.1, m, fix)
+
+
+def _gapped_series(seed: int, n: int = 20_000) -> tuple[np.ndarray, np.ndarray]:
+    """White + random-walk rate with a NaN gap, a lone NaN sample and a short excised burst."""
+    rng = np.random.default_rng(seed)
+    y = rng.standard_normal(n) + 1e-2 * np.cumsum(rng.standard_normal(n))
+    excluded = np.zeros(n, dtype=bool)
+    excluded[6_000:6_700] = True  # missing frames
+    excluded[11_111] = True  # one NaN row
+    excluded[15_000:15_040] = True  # an excised event
+    y[excluded] = np.nan
+    return y, excluded
+
+
+def test_gap_tolerant_oadev_equals_pooled_allantools_segments():
+    """Independent estimate: allantools' overlapping ADEV of each clean segment, its terms
+    pooled (avar_s * terms_s summed over segments, / total terms) — exactly the terms kept."""
+    y, excluded = _gapped_series(7)
+    tau0 = 0.01
+    runs = allan.clean_runs(excluded)
+    np.testing.assert_array_equal(runs, [[0, 6000], [6700, 11111], [11112, 15000], [15040, 20000]])
+    m = np.array([1, 2, 5, 10, 50, 200, 1000, 2400])
+    ours, n_terms = oadev(y, tau0, m, excluded=excluded)
+    num = np.zeros(m.size)
+    den = np.zeros(m.size)
+    for s, e in runs:
+        seg = y[s:e]
+        for j, mj in enumerate(m):
+            if e - s >= 2 * mj:
+                _, dev, _, ns = allantools.oadev(
+                    seg, rate=1 / tau0, data_type="freq", taus=[mj * tau0]
+                )
+                num[j] += dev[0] ** 2 * ns[0]
+                den[j] += ns[0]
+    np.testing.assert_array_equal(n_terms, den)
+    np.testing.assert_allclose(ours, np.sqrt(num / den), rtol=1e-10)
+    assert n_terms[-1] == 6000 + 1 - 4800 + 4960 + 1 - 4800  # only two runs hold m = 2400
+
+
+def test_gap_free_mask_is_bitwise_the_plain_estimate():
+    y = np.random.default_rng(8).standard_normal((3_000, 2))
+    m = tau_factors(3_000)
+    plain = allan_curves(y, 0.01, m)
+    masked = allan_curves(y, 0.01, m, excluded=np.zeros(3_000, dtype=bool))
+    for a, b in zip(plain, masked, strict=True):
+        np.testing.assert_array_equal(a.adev, b.adev)
+        np.testing.assert_array_equal(a.edf, b.edf)
+        np.testing.assert_array_equal(a.n_terms, b.n_terms)
+
+
+def test_gap_tolerant_curves_edf_and_factors():
+    """The edf is the sum of each clean run's Greenhall edf; factors without a term are left
+    out; NaN samples under the mask never reach the estimate."""
+    y, excluded = _gapped_series(9)
+    (c,) = allan_curves(y, 0.01, excluded=excluded)
+    assert np.all(np.isfinite(c.adev)) and np.all(c.n_terms > 0)
+    grid = tau_factors(20_000)
+    np.testing.assert_allclose(c.tau_s, 0.01 * grid[grid <= 3000])  # longest run: 6000 samples
+    runs = allan.clean_runs(excluded)
+    j = int(np.searchsorted(c.tau_s, 1.0 - 1e-9))  # m = 100
+    expected = sum(
+        allan.edf_oadev(int(c.alpha[j]), 100, int(e - s) + 1) for s, e in runs if e - s >= 200
+    )
+    assert c.edf[j] == pytest.approx(expected, rel=1e-12)
+    # fewer usable terms than a gap-free record of the same length: a smaller edf
+    m = np.round(c.tau_s / 0.01).astype(int)
+    gap_free = [allan.edf_oadev(int(a), int(mj), 20_001) for a, mj in zip(c.alpha, m, strict=True)]
+    assert np.all(c.edf < gap_free)
+
+
+def test_excluded_mask_shape_and_all_excluded_are_refused():
+    y = np.ones(100)
+    with pytest.raises(ValueError, match="shape"):
+        oadev(y, 1.0, np.array([1]), excluded=np.zeros(99, dtype=bool))
+    with pytest.raises(ValueError, match="every sample"):
+        oadev(y, 1.0, np.array([1]), excluded=np.ones(100, dtype=bool))

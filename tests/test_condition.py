@@ -226,3 +226,46 @@ def test_dropped_messages_without_a_frame_counter_are_a_gap(missing: int) -> Non
     assert [seg.frames for seg in s.segments] == [500, 500]
     assert (s.counts["gaps"], s.counts["missed_frames"]) == (1, missing)
     assert f"1 gap(s) in time or frame counter ({missing} frames missing)" in " ".join(s.warnings)
+
+
+def test_mask_policy_keeps_the_whole_recording_around_a_missing_frame() -> None:
+    """One lost frame (stamp and counter skip) and a NaN row: with ``gaps="mask"`` nothing is
+    thrown away; the grid has a place for the lost frame, and both places are excluded."""
+
+    def missing(a):
+        a[300:] += 10_000_000 if a.max() > 1e6 else 1
+
+    def nan(a):
+        a[700] = np.nan
+
+    rec = recording(stamp_ns=missing, counter=missing, gyro_x=nan)
+    s = condition(rec, gaps="mask")
+    assert s.rows == slice(0, 1000) and s.samples == 1001 and s.usable_samples == 999
+    np.testing.assert_array_equal(np.flatnonzero(s.excluded), [300, 701])
+    assert s.grid_index[299:302].tolist() == [299, 301, 302]
+    assert s.counts["masked_samples"] == 2 and s.counts["missed_frames"] == 1
+    assert s.tau0_s == pytest.approx(0.01)
+    assert any("2 masked (0.2 %" in w for w in s.warnings)
+    assert not any("longest clean segment" in w for w in s.warnings)
+    x = rec.frames["gyro_x"][s.rows].to_numpy()
+    y = s.on_grid(x)
+    assert y[300] == pytest.approx((x[299] + x[300]) / 2)  # the hole, linearly filled
+    assert y[702] == x[701] and np.isfinite(y).all()
+
+
+def test_mask_policy_falls_back_when_most_of_the_grid_is_a_gap() -> None:
+    def gap(a):
+        a[600:] += 3600 * 10**9
+
+    s = condition(recording(stamp_ns=gap), gaps="mask")
+    assert s.excluded is None and s.segment.frames == 600
+    assert any("more than 50 % of the sample grid" in w for w in s.warnings)
+
+
+def test_mask_policy_duplicate_stamp_row_is_excluded_not_shifted() -> None:
+    def dup(a):
+        a[100] = a[99]
+
+    s = condition(recording(stamp_ns=dup), gaps="mask")
+    assert s.samples == 1000  # the counter keeps every row in its place
+    np.testing.assert_array_equal(np.flatnonzero(s.excluded), [100])

@@ -288,3 +288,18 @@ def test_rosbag2_directory_with_split_files(tmp_path: Path, capsys) -> None:
     code, report, _ = analyze(bag, capsys)
     assert code == 0 and report["input"]["warnings"] == []
     assert report["input"]["frames"] == N and report["input"]["rate_hz"] == pytest.approx(100)
+
+
+def test_gaps_mask_analyses_the_whole_recording(tmp_path: Path, capsys, clean: FrameBlock) -> None:
+    """``--gaps mask``: one lost frame costs the Allan terms that touch it, not a segment."""
+    block = clean[np.delete(np.arange(N), 2000)]  # stamp and counter skip one frame
+    code, report, err = analyze(write_adis(tmp_path / "f.mcap", block), capsys, "--gaps", "mask")
+    assert code == 0, err
+    w = warnings_of(report)
+    assert "1 gap(s) in time or frame counter (1 frames missing)" in w
+    assert f"uniform grid of {N} samples with 1 masked" in w
+    assert "longest clean segment" not in w
+    assert report["input"]["frames"] == N - 1
+    allan = report["axes"]["gyro_x"]["allan"]
+    assert allan["n_terms"][0] == (N + 1 - 2) - 2  # m = 1: the two terms over sample 2000
+    assert allan["n_terms"][2] == (N + 1 - 6) - 6  # m = 3: 2m terms lost

@@ -16,12 +16,18 @@ import subprocess
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal, Protocol
+from typing import Protocol
 
 import numpy as np
 import polars as pl
 
-from imupipe.analysis.condition import ConditionedSeries, condition, is_stuck, stuck_warning
+from imupipe.analysis.condition import (
+    ConditionedSeries,
+    GapPolicy,
+    condition,
+    is_stuck,
+    stuck_warning,
+)
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.errors import TooFewFramesError
 from imupipe.io.columns import HOUSEKEEPING, ColumnSource, open_columns
@@ -47,7 +53,7 @@ MIN_FRAMES = 16
 class AnalyzeOptions:
     topic: str | None = None
     taus_per_decade: int = 10
-    gaps: Literal["longest", "fail"] = "longest"
+    gaps: GapPolicy = "longest"
     loop: bool = True
     rrd: bool = True
     figures: bool = True
@@ -85,34 +91,83 @@ def axis_result(
     temp_d: np.ndarray | None,
     supply_d: np.ndarray | None,
     loop: bool,
+    excluded: np.ndarray | None = None,
 ) -> AxisResult:
-    """Stage 4 (+ loop) of one axis: mean, rms, IEEE 952 terms and the closed loop
-    (``temp_d``, ``supply_d``: the segment's temperature and supply as
-    :func:`imupipe.model.loop.aux_block_means`)."""
+    """Stage 4 (+ loop) of one axis: outliers excised (:func:`excise_outliers`), mean, rms,
+    IEEE 952 terms and the closed loop (``temp_d``, ``supply_d``: the segment's temperature and
+    supply as :func:`imupipe.model.loop.aux_block_means`; ``excluded``: the samples masked by
+    the ``"mask"`` gap policy, left out of mean and rms too)."""
     sensor = sensor_of(name)
+    usable = None if excluded is None else ~excluded
+    y, curve, outliers = excise_outliers(y, tau0_s, curve, excluded)
     return AxisResult(
         name=name,
         sensor=sensor,
         unit="rad/s" if sensor == "gyro" else "m/s^2",
-        mean=float(y.mean()),
-        rms=float(y.std()),
+        mean=float(y.mean(where=usable) if usable is not None else y.mean()),
+        rms=float(y.std(where=usable) if usable is not None else y.std()),
         curve=curve,
         terms=fit_noise_terms(curve, sensor),
-        loop=close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d), curve)
+        loop=close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d, excluded), curve)
         if loop
         else None,
+        outliers=outliers,
     )
+
+
+def excise_outliers(
+    y: np.ndarray, tau0_s: float, curve: AllanCurve, excluded: np.ndarray | None
+) -> tuple[np.ndarray, AllanCurve, dict | None]:
+    """Outliers (:func:`imupipe.model.effects.spike_candidate`: beyond a family-wise, LSB- and
+    tail-aware limit from the local median) replaced by their local median before the noise
+    fit and the loop, and the Allan curve recomputed without them.  Returns the series (a
+    corrected copy when any was found), its curve and what was excised (SI units), or the
+    inputs and None."""
+    found = spike_candidate(y, tau0_s)
+    if found is None:
+        return y, curve, None
+    fix = found.spikes
+    y = y.copy()
+    y[fix.index] -= fix.value
+    m = np.round(curve.tau_s / tau0_s).astype(np.int64)
+    (curve,) = allan_curves([y], tau0_s, m, excluded=excluded)
+    ev = found.evidence
+    return (
+        y,
+        curve,
+        {
+            "count": int(fix.index.size),
+            "max_size": ev["max_size"],
+            "median_size": found.params["size"],
+            "limit": ev["limit"],
+            "threshold_z": ev["threshold_z"],
+            "sigma": found.params["sigma"],
+            "lsb": ev["lsb"],
+            "first_times_s": ev["first_times_s"],
+        },
+    )
+
+
+def outlier_warnings(results: dict[str, AxisResult]) -> list[str]:
+    """One warning per axis whose outliers were excised."""
+    return [
+        f"{name}: {o['count']} outlier sample(s) up to {o['max_size']:.3g} {res.unit} from the "
+        f"local median excised (limit {o['limit']:.3g} {res.unit} = {o['threshold_z']:.1f} "
+        f"sigma + LSB/2; replaced by the local median, first at {o['first_times_s'][0]:.2f} s)"
+        for name, res in results.items()
+        if (o := res.outliers) is not None
+    ]
 
 
 def input_summary(
     rec: ImuRecording, series: ConditionedSeries, warnings: list[str]
 ) -> InputSummary:
-    """The report's ``input`` section for the chosen segment."""
-    n = series.segment.frames
+    """The report's ``input`` section for the chosen segment (or masked grid)."""
+    n = series.samples
     return InputSummary(
         path=str(rec.path),
         topic=rec.topic,
-        frames=n,
+        frames=series.usable_samples,
         rate_hz=series.rate_hz,
         duration_s=n * series.tau0_s,
         segments=[s.as_dict() for s in series.segments],
@@ -129,11 +184,15 @@ def analyze_axes(
     options: AnalyzeOptions,
     progress: StageProgress,
 ) -> tuple[dict[str, AxisResult], list[str]]:
-    """Stages 3–4 (+ loop) on the chosen segment, one axis at a time; returns the results of
-    the analysed axes and the axes found stuck (constant: nothing to analyse)."""
+    """Stages 3–4 (+ loop) on the chosen segment (or, policy ``"mask"``, the whole recording
+    on its sample grid), one axis at a time; returns the results of the analysed axes and the
+    axes found stuck (constant: nothing to analyse)."""
     rows, tau0 = series.rows, series.tau0_s
-    aux = {name: aux_block_means(source.column(name, rows), tau0) for name in HOUSEKEEPING}
-    m = tau_factors(series.segment.frames, per_decade=options.taus_per_decade)
+    aux: dict[str, np.ndarray | None] = {}
+    for name in HOUSEKEEPING:
+        x = source.column(name, rows)
+        aux[name] = aux_block_means(None if x is None else series.on_grid(x), tau0)
+    m = tau_factors(series.samples, per_decade=options.taus_per_decade)
     results: dict[str, AxisResult] = {}
     stuck: list[str] = []
     with progress.stage("analyse", len(AXES), "axes") as advance:
@@ -143,10 +202,12 @@ def analyze_axes(
             if is_stuck(y):
                 stuck.append(name)
             else:
-                curve = allan_curves([y], tau0, m)[0]
+                y = series.on_grid(y)
+                curve = allan_curves([y], tau0, m, excluded=series.excluded)[0]
                 results[name] = axis_result(
-                    name, y, curve, tau0, aux["temp_c"], aux["supply_v"], options.loop
-                )
+                    name, y, curve, tau0, aux["temp_c"], aux["supply_v"], options.loop,
+                    series.excluded,
+                )  # fmt: skip
             del y  # the spilled source's axis leaves before the next one comes
             advance(i + 1)
     return results, stuck
@@ -170,7 +231,7 @@ def analyze(
                 load_kernels(options.loop)
         rec = source.conditioning()
         series = condition(rec, gaps=options.gaps)
-        check_frames(rec, series.segment.frames)
+        check_frames(rec, series.usable_samples)
         if options.rrd:
             outputs.begin(source.signals(rec.frames, series.rows))
         about = replace(rec, frames=rec.frames.clear())
@@ -183,6 +244,7 @@ def analyze(
         warnings = [
             *series.warnings,
             *(stuck_warning(a) for a in stuck),
+            *outlier_warnings(results),
             *source.notes(series.segment.frames, options.rrd),
         ]
     result = AnalysisResult(

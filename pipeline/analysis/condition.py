@@ -3,18 +3,30 @@
 The Allan variance assumes equally spaced samples with no gaps.  This stage never interpolates:
 it finds every place where that assumption breaks — a gap in time or in the frame counter,
 a non-increasing stamp, a non-finite or saturated sample — cuts the recording there into
-segments, and hands the longest clean segment on (policy ``"longest"``), or refuses
-(policy ``"fail"``).  Everything it found is counted and stated as a warning.
+segments, and hands the longest clean segment on (policy ``"longest"``), refuses
+(policy ``"fail"``), or keeps the whole recording with the breaks masked (policy ``"mask"``).
+Everything it found is counted and stated as a warning.
+
+Policy ``"mask"``: every row gets its place on the uniform sample grid (the frame counter's
+step where it agrees with the stamps to within a sample, else the stamp step in periods);
+missing frames are grid places without a row, and they, non-finite or saturated rows and rows
+after a duplicate, backwards or disagreeing stamp are *excluded*.  The gap-tolerant Allan
+variance (:mod:`imupipe.stats.allan`, ``excluded``) skips every term that touches one, so a
+missing frame costs the terms around it, not half the recording.  When more than
+:data:`MAX_MASKED_FRACTION` of the grid would be excluded (e.g. a clock jumping by days), the
+longest clean segment is analysed instead, with a warning.
 
 Contract: :class:`ConditionedSeries` — the segments found, the chosen one (rows of the decoded
-frame), ``tau0_s`` the sampling interval estimated as its mean stamp step, what was counted and
-the warnings.  The decoded frame is only read, never changed or kept.
+frame; with ``"mask"`` every row, ``grid_index``/``excluded`` saying where each row sits on the
+sample grid and which grid samples are excluded), ``tau0_s`` the sampling interval estimated as
+the mean stamp step, what was counted and the warnings.  The decoded frame is only read, never
+changed or kept.
 """
 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -31,6 +43,10 @@ JITTER_SIGMAS = 6.0
 step (1.4826 × median absolute deviation) to count as a gap."""
 JITTER_WARN = 0.1
 """Warn when the rms stamp jitter exceeds this fraction of the period."""
+MAX_MASKED_FRACTION = 0.5
+"""Policy ``"mask"``: beyond this excluded fraction of the grid, the longest segment is used."""
+
+GapPolicy = Literal["longest", "fail", "mask"]
 
 
 @dataclass(frozen=True)
@@ -66,6 +82,10 @@ class ConditionedSeries:
     chosen: int
     counts: dict[str, int] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    grid_index: np.ndarray | None = None
+    """Policy ``"mask"``: int64 (rows,) place of each row of the recording on the sample grid."""
+    excluded: np.ndarray | None = None
+    """Policy ``"mask"``: bool (grid samples,) True where no usable sample exists."""
 
     @property
     def rate_hz(self) -> float:
@@ -78,8 +98,35 @@ class ConditionedSeries:
 
     @property
     def rows(self) -> slice:
-        """The chosen segment's rows of the decoded frame."""
+        """The rows of the decoded frame to analyse: the chosen segment's, or (``"mask"``)
+        every row of the recording."""
+        if self.grid_index is not None:
+            return slice(0, len(self.grid_index))
         return slice(self.segment.start, self.segment.stop)
+
+    @property
+    def samples(self) -> int:
+        """Samples of the analysed series: grid places (``"mask"``), else the segment's rows."""
+        return self.segment.frames if self.excluded is None else len(self.excluded)
+
+    @property
+    def usable_samples(self) -> int:
+        """Samples that carry data (the grid places not excluded)."""
+        return self.samples - (0 if self.excluded is None else int(self.excluded.sum()))
+
+    def on_grid(self, values: np.ndarray) -> np.ndarray:
+        """A column of :attr:`rows` as the analysed series: itself (no mask), else float64 on
+        the grid, excluded samples filled by linear interpolation between their usable
+        neighbours (only for the time-domain steps; the Allan variance never reads them)."""
+        if self.excluded is None or self.grid_index is None:
+            return values
+        out = np.empty(len(self.excluded))
+        usable = ~self.excluded
+        out[self.grid_index] = values
+        places = np.flatnonzero(usable)
+        holes = np.flatnonzero(self.excluded)
+        out[holes] = np.interp(holes, places, out[places])
+        return out
 
 
 def is_stuck(y: np.ndarray) -> bool:
@@ -161,8 +208,36 @@ def _step_jitter(t: np.ndarray) -> float:
     return float(np.sqrt(total / (len(t) - 1)))
 
 
-def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -> ConditionedSeries:
-    """Cut ``rec`` into uniformly sampled segments and pick the one to analyse."""
+def _grid_places(
+    t: np.ndarray, counter: np.ndarray | None, period: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(grid place of each row (int64, first row 0), rows whose place is uncertain (bool)).
+
+    A row's step from its predecessor is the counter's step (modulo 2**32) where that agrees
+    with the stamp step rounded to periods within one sample (or 1 %), else the stamp step
+    (at least 1).  Uncertain: a zero or negative stamp step, or a counter that disagrees."""
+    d = np.diff(t)
+    step = np.maximum(np.rint(d / period), 1).astype(np.int64)
+    uncertain = np.concatenate(([False], d <= 0))
+    if counter is not None:
+        by_counter = np.diff(counter.astype(np.uint32)).astype(np.int64)
+        agree = (by_counter >= 1) & (np.abs(by_counter - step) <= np.maximum(1, step // 100))
+        step = np.where(agree, by_counter, step)
+        uncertain[1:] |= ~agree
+    return np.concatenate(([0], np.cumsum(step))), uncertain
+
+
+def _mask_warning(series_samples: int, excluded: int, n: int) -> str:
+    return (
+        f"analysing the whole recording on a uniform grid of {series_samples} samples with "
+        f"{excluded} masked ({100 * excluded / series_samples:.3g} %: missing frames and "
+        f"excluded rows; {n} frames read); Allan variance terms touching them are skipped"
+    )
+
+
+def condition(rec: ImuRecording, gaps: GapPolicy = "longest") -> ConditionedSeries:
+    """Cut ``rec`` into uniformly sampled segments and pick the one to analyse (``gaps``:
+    ``"longest"``, ``"fail"`` or ``"mask"``, module docstring)."""
     df = rec.frames
     n = df.height
     if n < 2:
@@ -224,6 +299,14 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
 
     chosen = int(np.argmax([s.frames for s in segments]))
     seg = segments[chosen]
+    if gaps == "mask" and len(segments) > 1:
+        masked = _masked_series(rec, t, counter, period, bad_row, segments, chosen, counts)
+        if masked is not None:
+            return replace(masked, warnings=(*warnings, *masked.warnings))
+        warnings.append(
+            f"more than {100 * MAX_MASKED_FRACTION:.0f} % of the sample grid would be masked: "
+            "the longest clean segment is analysed instead"
+        )
     if len(segments) > 1:
         if gaps == "fail":
             raise ImupipeError(
@@ -259,4 +342,46 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
         chosen=chosen,
         counts=counts,
         warnings=tuple(warnings),
+    )
+
+
+def _masked_series(
+    rec: ImuRecording,
+    t: np.ndarray,
+    counter: np.ndarray | None,
+    period: float,
+    bad_row: np.ndarray,
+    segments: list[Segment],
+    chosen: int,
+    counts: dict[str, int],
+) -> ConditionedSeries | None:
+    """Policy ``"mask"``: the whole recording on its sample grid, or None if more than
+    :data:`MAX_MASKED_FRACTION` of the grid would be excluded."""
+    df = rec.frames
+    place, uncertain = _grid_places(t, counter, period)
+    usable_row = ~(bad_row | uncertain)
+    excluded = np.ones(int(place[-1]) + 1, dtype=bool)
+    excluded[place[usable_row]] = False
+    n_excluded = int(excluded.sum())
+    if n_excluded > MAX_MASKED_FRACTION * len(excluded) or usable_row.sum() < 2:
+        return None
+    first, last = np.flatnonzero(usable_row)[[0, -1]]
+    tau0 = float((t[last] - t[first]) / (place[last] - place[first]))
+    counts["masked_samples"] = n_excluded
+    counts["grid_samples"] = len(excluded)
+    warnings = [_mask_warning(len(excluded), n_excluded, df.height)]
+    if abs(tau0 / period - 1) > 1e-3:
+        warnings.append(
+            f"measured mean rate {1 / tau0:.4f} Hz differs from the nominal {1 / period:g} Hz; "
+            "the measured rate is used"
+        )
+    return ConditionedSeries(
+        tau0_s=tau0,
+        nominal_rate_hz=1.0 / period,
+        segments=tuple(segments),
+        chosen=chosen,
+        counts=counts,
+        warnings=tuple(warnings),
+        grid_index=place,
+        excluded=excluded,
     )

@@ -40,6 +40,8 @@ class AxisResult:
     curve: AllanCurve
     terms: NoiseTerms
     loop: LoopResult | None = None
+    outliers: dict | None = None
+    """Samples excised before the fit (:func:`imupipe.analysis.analyze.excise_outliers`)."""
 
 
 @dataclass(frozen=True)
@@ -143,6 +145,8 @@ def _axis_json(axis: AxisResult) -> dict:
         "ieee952": axis.terms.as_dict(),
         "ieee952_fit": axis.terms.fit_summary(),
     }
+    if axis.outliers is not None:
+        out["outliers"] = axis.outliers
     loop = axis.loop
     if loop is not None:
         out["allan"]["adev_after"] = loop.adev_after

@@ -415,13 +415,40 @@ def warmup_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
     return cand
 
 
+LEVEL_BLOCK_S = 0.25
+"""Spikes are measured from the median of their block of this length (at least
+:data:`LEVEL_MIN_BLOCK` samples): a spike of up to a quarter block barely moves it, and slow
+wander (drift, Gauss–Markov, a 0.5 Hz disturbance) does not count as a deviation."""
+LEVEL_MIN_BLOCK = 16
+TAIL_P = 1e-3
+"""The noise scale is also read from the (1 − TAIL_P) quantile of |deviation| (as if Gaussian),
+so a heavy-tailed core (real MEMS noise) is not taken for outliers; spikes must be rarer."""
+SPIKE_FALSE_ALARM = 1e-3
+"""Family-wise (whole record) false-alarm rate of the spike threshold under Gaussian noise."""
+
+
 @numba.njit(cache=True, nogil=True)
-def _beyond(y: np.ndarray, med: float, scale: float, thr: float) -> np.ndarray:
-    """Indices i with |y_i − med| / scale > thr (one pass, no full-length temporaries)."""
+def _block_level(y: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    """(median of each block of ``block`` samples (the last may be shorter), float32 deviation
+    y_i − median of i's block)."""
+    n = y.size
+    level = np.empty((n + block - 1) // block)
+    dev = np.empty(n, np.float32)
+    for b in range(level.size):
+        lo, hi = b * block, min(n, (b + 1) * block)
+        level[b] = np.median(y[lo:hi])
+        for i in range(lo, hi):
+            dev[i] = y[i] - level[b]
+    return level, dev
+
+
+@numba.njit(cache=True, nogil=True)
+def _beyond(dev: np.ndarray, limit: float) -> np.ndarray:  # pragma: no cover (JIT)
+    """Indices i with |dev_i| > limit (one pass, no full-length temporaries)."""
     out = np.empty(0, np.int64)
     count = 0
-    for i in range(len(y)):
-        if abs(y[i] - med) / scale > thr:
+    for i in range(len(dev)):
+        if abs(dev[i]) > limit:
             if count == len(out):
                 grown = np.empty(max(16, 2 * count), np.int64)
                 grown[:count] = out
@@ -432,30 +459,49 @@ def _beyond(y: np.ndarray, med: float, scale: float, thr: float) -> np.ndarray:
 
 
 def spike_candidate(y: np.ndarray, tau0: float) -> Candidate | None:
-    """Samples beyond a robust z threshold with a family-wise false-alarm rate of 1e-3 (Gaussian).
+    """Spikes: samples whose deviation from their block's median exceeds a threshold with a
+    family-wise false-alarm rate of :data:`SPIKE_FALSE_ALARM` (Gaussian), knowing the LSB.
 
-    Scale from the median absolute deviation of first differences (insensitive to slow drift;
-    :mod:`imupipe.stats.robust`, no copy of the series).  The correction replaces each spike by the
-    series' median.
+    Deviation: y_i minus the median of i's block of :data:`LEVEL_BLOCK_S` (float32, 4 bytes a
+    sample).  Noise scale: the larger of 1.4826 × median |deviation| and the (1 − TAIL_P)
+    quantile of |deviation| / Φ⁻¹(1 − TAIL_P/2) (:mod:`imupipe.stats.robust`, no copies).
+    Quantisation: with an LSB q (:func:`imupipe.stats.robust.quantum`) a quantised deviation of
+    k·q stands for a true one beyond (k − 1/2)·q, so the limit is z·scale + q/2 — the tail of
+    coarsely quantised noise (e.g. 7 LSB at z·scale = 6.2 LSB) is not a spike.  The correction
+    replaces each spike by its block's median.
     """
-    y = np.ascontiguousarray(y)
-    med = robust.median(y)
-    scale = robust.MAD_TO_SIGMA * robust.mad(y, differences=True) / np.sqrt(2)
-    if scale == 0:
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    block = max(LEVEL_MIN_BLOCK, round(LEVEL_BLOCK_S / tau0))
+    level, dev = _block_level(y, min(block, y.size))
+    sigma_mad = robust.MAD_TO_SIGMA * robust.mad(dev, center=0.0)
+    sigma_tail = robust.abs_quantile(dev, 1.0 - TAIL_P) / float(-special.ndtri(TAIL_P / 2))
+    scale = max(sigma_mad, sigma_tail)
+    if not scale > 0:
         return None
-    thr = float(-special.ndtri(1e-3 / (2 * len(y))))  # norm.isf
-    idx = _beyond(y, med, scale, thr)
+    lsb = robust.quantum(y)
+    thr = float(-special.ndtri(SPIKE_FALSE_ALARM / (2 * len(y))))  # norm.isf
+    limit = thr * scale + lsb / 2
+    idx = _beyond(dev, limit)
     if idx.size == 0:
         return None
-    value = y[idx] - med
+    value = y[idx] - level[idx // min(block, y.size)]
+    size = np.abs(value)
     return Candidate(
         "spike",
-        {"count": float(idx.size), "size": float(np.median(np.abs(value))), "sigma": scale},
+        {"count": float(idx.size), "size": float(np.median(size)), "sigma": scale},
         {},
-        {"threshold_z": thr, "first_times_s": (idx[:10] * tau0).tolist()},
+        {
+            "threshold_z": thr,
+            "limit": limit,
+            "lsb": lsb,
+            "sigma_mad": sigma_mad,
+            "sigma_tail": sigma_tail,
+            "max_size": float(size.max()),
+            "first_times_s": (idx[:10] * tau0).tolist(),
+        },
         spikes=SparseCorrection(idx, value),
         n_params=int(idx.size),
-        p_value=1e-3,
+        p_value=SPIKE_FALSE_ALARM,
     )
 
 

@@ -75,6 +75,7 @@ class AxisSignals:
     tau0: float  # s
     temp_d: np.ndarray | None  # (n // block_size,) °C
     supply_d: np.ndarray | None  # (n // block_size,) V
+    excluded: np.ndarray | None = None  # (n,) bool: masked samples (gap policy "mask")
 
 
 @dataclass
@@ -243,7 +244,7 @@ class _Axis:
         AVAR_d(y_d − g) − AVAR_d(y_d) added on τ ≥ block (slow corrections do not act below)."""
         if cand.spikes is not None:
             m = np.round(self.tau / self.sig.tau0).astype(int)
-            return oadev(self.sig.y, self.sig.tau0, m, cand.spikes)[0] ** 2
+            return oadev(self.sig.y, self.sig.tau0, m, cand.spikes, self.sig.excluded)[0] ** 2
         if state.avar_d is None:
             state.avar_d = oadev(state.y_d, self.dt, self.m_d)[0] ** 2
         avar_d = oadev(state.y_d - cand.correction, self.dt, self.m_d)[0] ** 2
@@ -261,9 +262,13 @@ class _Axis:
         m = np.round(self.tau / self.sig.tau0).astype(int)
         m = m[m <= (h - 1) // 4]
         out = []
+        excluded = self.sig.excluded
         for start in (0, h):
             spikes = state.spikes.within(start, start + h) if state.spikes else None
-            (c,) = allan_curves(y[start : start + h], self.sig.tau0, m, correction=spikes)
+            mask = None if excluded is None else excluded[start : start + h]
+            (c,) = allan_curves(
+                y[start : start + h], self.sig.tau0, m, correction=spikes, excluded=mask
+            )
             out.append((np.asarray(c.tau_s), np.asarray(c.adev) ** 2, ieee952.monotone_edf(c.edf)))
         return out
 

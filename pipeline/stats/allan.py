@@ -10,6 +10,13 @@ for each (m, axis) is one fused, vectorised pass compiled by numba and spread ov
 numpy would need three passes that write memory per m (measured 3-4x slower), and the phase is
 the only large allocation (bounded by :data:`PHASE_BUDGET_BYTES`).
 Intervals: :mod:`imupipe.stats.edf`.
+
+Gaps: with a boolean ``excluded`` mask (missing frames, NaN or saturated rows, excised events),
+the sum skips every term whose window of 2m samples touches an excluded sample, and divides by
+the number of terms actually summed — i.e. the terms of eq. (11) evaluated on each clean run
+[s, e) of samples (L = e - s samples, L + 1 - 2m terms) and pooled.  The equivalent degrees of
+freedom are the sum of Greenhall's edf of each run (runs treated as independent records).
+Without an excluded sample the computation is the gap-free one, unchanged.
 """
 
 from __future__ import annotations
@@ -87,19 +94,57 @@ def _single(cols: list[np.ndarray], correction: SparseCorrection | None) -> Spar
     return correction
 
 
-def phase(y: Rates, tau0: float, correction: SparseCorrection | None = None) -> np.ndarray:
+def clean_runs(excluded: np.ndarray) -> np.ndarray:
+    """(k, 2) int64 ``[start, stop)``: the maximal runs of samples not ``excluded`` (bool (n,))."""
+    padded = np.concatenate(([True], np.asarray(excluded, dtype=bool), [True]))
+    return np.flatnonzero(padded[1:] != padded[:-1]).astype(np.int64).reshape(-1, 2)
+
+
+def run_terms(runs: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Terms of eq. (11) that lie inside one clean run, per factor m: sum_r max(0, L_r + 1 - 2m)."""
+    lengths = runs[:, 1] - runs[:, 0]
+    m = np.asarray(m, dtype=np.int64)
+    return np.maximum(lengths[None, :] + 1 - 2 * m[:, None], 0).sum(axis=1)
+
+
+def _runs_of(excluded: np.ndarray | None, n: int) -> np.ndarray | None:
+    """The clean runs of a mask of ``n`` samples, or None when nothing is excluded."""
+    if excluded is None:
+        return None
+    excluded = np.asarray(excluded, dtype=bool)
+    if excluded.shape != (n,):
+        raise ValueError(f"the excluded mask has shape {excluded.shape}, the series ({n},)")
+    if not excluded.any():
+        return None
+    if excluded.all():
+        raise ValueError("every sample is excluded")
+    return clean_runs(excluded)
+
+
+def phase(
+    y: Rates,
+    tau0: float,
+    correction: SparseCorrection | None = None,
+    excluded: np.ndarray | None = None,
+) -> np.ndarray:
     """Phase of rate samples ``y``: x = tau0*cumsum(y - mean), x_0 = 0.
 
     Returned axis-major, shape (k, n + 1) (or (n + 1,) for 1-D input), C-contiguous so each
     axis' phase is one contiguous row for :func:`_sum_sq_second_diff`.  Units: those of y times
     seconds (e.g. rad for a gyro in rad/s).  NIST SP 1065 eq. (1).  ``correction`` (1-D ``y``
-    only) is subtracted from y first.
+    only) is subtracted from y first.  ``excluded`` (bool (n,)): those samples are never read
+    (they may be NaN); the mean is that of the others and the phase stays flat across them.
     """
     cols = _columns(y)
     fix = _single(cols, correction)
     x = np.empty((len(cols), len(cols[0]) + 1))
+    skip = None if _runs_of(excluded, len(cols[0])) is None else np.asarray(excluded, dtype=bool)
     for row, col in zip(x, cols, strict=True):
-        _integrate(np.asarray(col, dtype=np.float64), tau0, row, fix.index, fix.value)
+        col = np.asarray(col, dtype=np.float64)
+        if skip is None:
+            _integrate(col, tau0, row, fix.index, fix.value)
+        else:
+            _integrate_excluding(col, tau0, row, skip, fix.index, fix.value)
     return x[0] if isinstance(y, np.ndarray) and y.ndim == 1 else x
 
 
@@ -127,6 +172,61 @@ def _integrate(
         x[i + 1] = acc * tau0
 
 
+@numba.njit(cache=True, nogil=True)
+def _integrate_excluding(
+    y: np.ndarray,
+    tau0: float,
+    x: np.ndarray,
+    excluded: np.ndarray,
+    fix_index: np.ndarray,
+    fix_value: np.ndarray,
+) -> None:  # pragma: no cover (JIT)
+    """:func:`_integrate` with the ``excluded`` samples (and their fixes) skipped: the mean is
+    over the other samples, and an excluded sample adds nothing (x[i + 1] = x[i])."""
+    mean = 0.0
+    count = 0
+    for i in range(y.size):
+        if not excluded[i]:
+            mean += y[i]
+            count += 1
+    for k in range(fix_index.size):
+        if not excluded[fix_index[k]]:
+            mean -= fix_value[k]
+    mean /= count
+    acc = 0.0
+    x[0] = 0.0
+    k = 0
+    for i in range(y.size):
+        v = y[i]
+        if k < fix_index.size and fix_index[k] == i:
+            v -= fix_value[k]
+            k += 1
+        if not excluded[i]:
+            acc += v - mean
+        x[i + 1] = acc * tau0
+
+
+@numba.njit(parallel=True, fastmath=True, cache=True, nogil=True)
+def _sum_sq_second_diff_runs(
+    x: np.ndarray, m: np.ndarray, runs: np.ndarray
+) -> np.ndarray:  # pragma: no cover (JIT)
+    """:func:`_sum_sq_second_diff` over the terms inside the clean ``runs`` only: run [s, e) of
+    samples holds the terms i = s .. e - 2m (their samples i .. i + 2m - 1 all lie in it)."""
+    k = x.shape[0]
+    out = np.empty((m.size, k))
+    for job in numba.prange(m.size * k):
+        j, a = job // k, job % k
+        lag = m[j]
+        row = x[a]
+        acc = 0.0
+        for r in range(runs.shape[0]):
+            for i in range(runs[r, 0], runs[r, 1] - 2 * lag + 1):
+                d = row[i + 2 * lag] - 2.0 * row[i + lag] + row[i]
+                acc += d * d
+        out[j, a] = acc
+    return out
+
+
 @numba.njit(parallel=True, fastmath=True, cache=True, nogil=True)
 def _sum_sq_second_diff(x: np.ndarray, m: np.ndarray) -> np.ndarray:  # pragma: no cover (JIT)
     """sum_i (x[a, i+2m] - 2 x[a, i+m] + x[a, i])**2 over the N - 2m terms, for every m and axis.
@@ -149,11 +249,19 @@ def _sum_sq_second_diff(x: np.ndarray, m: np.ndarray) -> np.ndarray:  # pragma: 
     return out
 
 
-def _oadev_of_phase(x: np.ndarray, tau0: float, m: np.ndarray) -> np.ndarray:
-    """Overlapping ADEV (len(m), k) from axis-major phase ``x`` (k, N); NIST SP 1065 eq. (11)."""
-    sums = _sum_sq_second_diff(x, m)
-    n_terms = x.shape[1] - 2 * m
-    return np.sqrt(sums / (2.0 * ((m * tau0) ** 2 * n_terms))[:, None])
+def _oadev_of_phase(
+    x: np.ndarray, tau0: float, m: np.ndarray, runs: np.ndarray | None = None
+) -> np.ndarray:
+    """Overlapping ADEV (len(m), k) from axis-major phase ``x`` (k, N); NIST SP 1065 eq. (11),
+    over the terms inside the clean ``runs`` if given (NaN where no term is left)."""
+    if runs is None:
+        sums = _sum_sq_second_diff(x, m)
+        n_terms = x.shape[1] - 2 * m
+    else:
+        sums = _sum_sq_second_diff_runs(x, m, runs)
+        n_terms = run_terms(runs, m)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(sums / (2.0 * ((m * tau0) ** 2 * n_terms))[:, None])
 
 
 def _checked_factors(m: np.ndarray, n: int) -> np.ndarray:
@@ -171,27 +279,34 @@ def _axis_groups(n: int, k: int) -> list[slice]:
 
 
 def oadev(
-    y: Rates, tau0: float, m: np.ndarray, correction: SparseCorrection | None = None
+    y: Rates,
+    tau0: float,
+    m: np.ndarray,
+    correction: SparseCorrection | None = None,
+    excluded: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Overlapping Allan deviation of rate samples ``y`` at tau = m * tau0.
 
     ``y`` is (n,) or (n, k) (k axes at once), sample interval ``tau0`` in seconds; ``m`` the
-    averaging factors (1 <= m <= n // 2); ``correction`` (1-D ``y`` only) is subtracted from y.
-    Returns ``adev`` with shape (len(m),) or (len(m), k), in the unit of y, and ``n_terms`` =
-    N - 2m (N = n + 1 phase points).  NIST SP 1065 eq. (11).
+    averaging factors (1 <= m <= n // 2); ``correction`` (1-D ``y`` only) is subtracted from y;
+    ``excluded`` (bool (n,), all axes) marks samples no term may touch (module docstring).
+    Returns ``adev`` with shape (len(m),) or (len(m), k), in the unit of y (NaN at a factor
+    without any term), and ``n_terms`` = N - 2m (N = n + 1 phase points), or the terms inside
+    the clean runs.  NIST SP 1065 eq. (11).
     """
     cols = _columns(y)
     n = len(cols[0])
     m = _checked_factors(m, n)
+    runs = _runs_of(excluded, n)
     adev = np.concatenate(
         [
-            _oadev_of_phase(phase(cols[g], tau0, correction), tau0, m)
+            _oadev_of_phase(phase(cols[g], tau0, correction, excluded), tau0, m, runs)
             for g in _axis_groups(n, len(cols))
         ],
         axis=1,
     )
     one_d = isinstance(y, np.ndarray) and y.ndim == 1
-    return (adev[:, 0] if one_d else adev), n + 1 - 2 * m
+    return (adev[:, 0] if one_d else adev), (n + 1 - 2 * m if runs is None else run_terms(runs, m))
 
 
 @dataclass(frozen=True)
@@ -199,7 +314,8 @@ class AllanCurve:
     """One axis' overlapping Allan deviation with its confidence interval.
 
     ``tau_s`` in seconds; ``adev``, ``adev_lo``, ``adev_hi`` in the unit of the input rate;
-    ``edf`` equivalent degrees of freedom (Greenhall); ``n_terms`` = N - 2m; ``alpha`` the
+    ``edf`` equivalent degrees of freedom (Greenhall); ``n_terms`` = N - 2m (with excluded
+    samples: the terms actually summed, see :func:`oadev`); ``alpha`` the
     power-law noise exponent identified at each tau (2 white PM ... -2 random-walk FM);
     ``confidence`` the two-sided level of [adev_lo, adev_hi].
     """
@@ -214,34 +330,56 @@ class AllanCurve:
     confidence: float
 
 
+def edf_runs(alpha: int, m: int, runs: np.ndarray) -> float:
+    """Equivalent degrees of freedom of the gap-tolerant estimate at factor ``m``: the sum of
+    :func:`imupipe.stats.edf.edf_oadev` over the clean runs holding a term (each run of L
+    samples an independent record of L + 1 phase points; runs of equal length computed once)."""
+    lengths, count = np.unique(runs[:, 1] - runs[:, 0], return_counts=True)
+    use = lengths >= 2 * m
+    pairs = zip(lengths[use], count[use], strict=True)
+    return float(sum(c * edf_oadev(alpha, m, int(ln) + 1) for ln, c in pairs))
+
+
 def allan_curves(
     y: Rates,
     tau0: float,
     m: np.ndarray | None = None,
     confidence: float = 0.683,
     correction: SparseCorrection | None = None,
+    excluded: np.ndarray | None = None,
 ) -> list[AllanCurve]:
     """Overlapping ADEV with Stable32-style intervals for each axis of ``y`` (see :data:`Rates`).
 
     ``m`` defaults to :func:`tau_factors`; ``correction`` (one axis only) is subtracted from
     y.  Per tau: noise type by :func:`imupipe.stats.edf.noise_ids`, edf by
     :func:`imupipe.stats.edf.edf_oadev`, interval by :func:`imupipe.stats.edf.chi2_interval` at
-    ``confidence`` (0.683, Stable32's default).
+    ``confidence`` (0.683, Stable32's default).  ``excluded`` (bool (n,)): the gap-tolerant
+    estimate (module docstring); factors without any term are left out, the edf
+    is :func:`edf_runs`, and the noise type is identified on the phase held flat across the
+    excluded samples.
     """
     cols = _columns(y)
     n = len(cols[0])
+    runs = _runs_of(excluded, n)
     m = tau_factors(n) if m is None else _checked_factors(m, n)
+    n_terms = n + 1 - 2 * m if runs is None else run_terms(runs, m)
+    if runs is not None:
+        keep = n_terms > 0
+        m, n_terms = m[keep], n_terms[keep]
     curves: list[AllanCurve] = []
     for group in _axis_groups(n, len(cols)):
-        x = phase(cols[group], tau0, correction)
-        adev = _oadev_of_phase(x, tau0, m)
+        x = phase(cols[group], tau0, correction, excluded)
+        adev = _oadev_of_phase(x, tau0, m, runs)
         for i in range(x.shape[0]):
             alpha = noise_ids(x[i], m)
             edf = np.array(
-                [edf_oadev(int(a), int(mj), n + 1) for a, mj in zip(alpha, m, strict=True)]
+                [
+                    edf_oadev(int(a), int(mj), n + 1)
+                    if runs is None
+                    else edf_runs(int(a), int(mj), runs)
+                    for a, mj in zip(alpha, m, strict=True)
+                ]
             )
             lo, hi = chi2_interval(adev[:, i], edf, confidence)
-            curves.append(
-                AllanCurve(m * tau0, adev[:, i], lo, hi, edf, n + 1 - 2 * m, alpha, confidence)
-            )
+            curves.append(AllanCurve(m * tau0, adev[:, i], lo, hi, edf, n_terms, alpha, confidence))
     return curves

@@ -131,3 +131,31 @@ def mad(x: np.ndarray, center: float | None = None, differences: bool = False) -
     (or ``np.diff(x)``) about ``center`` (default: their median), without temporaries."""
     center = median(x, differences) if center is None else center
     return _median(x, center, absolute=True, diff=differences)
+
+
+QUANTUM_PROBE = 1 << 16
+"""Samples examined by :func:`quantum`."""
+
+
+def quantum(x: np.ndarray, probe: int = QUANTUM_PROBE) -> float:
+    """The quantisation step (LSB) of ``x``, or 0.0 if it does not look quantised.
+
+    From the first ``probe`` finite samples: quantised when they take at most ``probe // 8``
+    distinct values; the step is then the least difference between two of them (float64
+    values of integer counts times an LSB: exact to rounding)."""
+    head = np.asarray(x[:probe], dtype=np.float64)
+    values = np.unique(head[np.isfinite(head)])
+    if values.size < 2 or values.size > max(2, head.size // 8):
+        return 0.0
+    return float(np.min(np.diff(values)))
+
+
+def abs_quantile(x: np.ndarray, p: float) -> float:
+    """``np.quantile(np.abs(v), p, method="higher")`` of the finite values v = x, without
+    copies: order statistic ceil(p (n - 1)) of |x| by histogram selection."""
+    x = np.ascontiguousarray(x)
+    count, lo, hi, finite = _extent(x, 0.0, True, False, False)
+    if count == 0 or not finite:
+        return float("nan")
+    k = int(np.ceil(p * (count - 1)))
+    return float(_select(x, k, lo, hi, 0.0, True, False)[0])
