@@ -127,6 +127,13 @@ def analyze(
         GapPolicy, typer.Option(help="longest: analyse the longest clean segment; fail: refuse.")
     ] = GapPolicy.longest,
     rrd: Annotated[bool, typer.Option(help="Write recording.rrd for the Rerun viewer.")] = True,
+    rrd_full: Annotated[
+        bool,
+        typer.Option(
+            help="Every raw frame in recording.rrd (default: a min/max envelope of 100 000 "
+            "bins once a recording has more than 200 000 frames)."
+        ),
+    ] = False,
     loop: Annotated[bool, typer.Option(help="Run the closed-loop effect search.")] = True,
     memory_budget_gb: Annotated[
         float,
@@ -149,6 +156,7 @@ def analyze(
         gaps=gaps.value,
         loop=loop,
         rrd=rrd,
+        rrd_full=rrd_full,
         memory_budget_bytes=round(memory_budget_gb * 1e9),
     )
     if topic != ALL_TOPICS:

@@ -45,6 +45,8 @@ class AnalyzeOptions:
     gaps: Literal["longest", "fail"] = "longest"
     loop: bool = True
     rrd: bool = True
+    rrd_full: bool = False
+    """Every raw frame in recording.rrd, not a min/max envelope (long recordings)."""
     figures: bool = True
     memory_budget_bytes: int = MEMORY_BUDGET_BYTES
 
@@ -164,7 +166,11 @@ def analyze(
         rec = decode(path, topic=options.topic, progress=advance)
     series = condition(rec, gaps=options.gaps)
     out_dir.mkdir(parents=True, exist_ok=True)
-    rrd = RrdWriter(out_dir / "recording.rrd", series.frames) if options.rrd else None
+    rrd = (
+        RrdWriter(out_dir / "recording.rrd", series.frames, options.rrd_full)
+        if options.rrd
+        else None
+    )
     try:
         result = analyze_series(rec, series, options, progress)
     except BaseException:
