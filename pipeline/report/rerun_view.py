@@ -403,13 +403,10 @@ def summary_markdown(result: AnalysisResult) -> str:
     (:mod:`imupipe.report.paper`), then the loop's before → after and the warnings."""
     inp = result.input
     md = [
-        "# Noise terms",
-        "",
         f"{_code(inp.path)} [{_code(inp.topic)}]: {inp.frames} frames, {inp.rate_hz:.4g} Hz, "
-        f"{inp.duration_s / 3600:.3g} h analysed.",
-        "",
-        "Measured values with their 95 % interval in SI, and in the units of the ADIS16364 paper "
-        "(the paper's and the datasheet's values are in those units).",
+        f"{inp.duration_s / 3600:.3g} h analysed.  Measured values with their 95 % interval in "
+        "SI, and in the units of the ADIS16364 paper (the paper's and the datasheet's values "
+        "are in those units)."
     ]
     header = (
         "quantity",
@@ -497,7 +494,7 @@ def blueprint(
     right = rrb.Vertical(
         rrb.Tabs(*allan, *residual, active_tab=0),
         rrb.TextDocumentView(origin="summary", name="Noise terms (SI and the paper's units)"),
-        row_shares=[3, 2],
+        row_shares=[1, 1],
     )
     if not signals:
         return rrb.Blueprint(right, collapse_panels=True, auto_views=False)
