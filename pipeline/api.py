@@ -77,6 +77,8 @@ def record(
     serial: int = 0,
     realtime: bool = False,
     progress: bool = False,
+    view: str | None = None,
+    view_port: int = 9876,
 ) -> RecordSummary:
     """Record ADIS16364 frames into an MCAP file (default: the paper's 12 h static test).
 
@@ -89,6 +91,9 @@ def record(
         truth: write the simulator's ground truth to this JSON file.
         source: ``"sim"`` (virtual ADIS16364) or ``"spi"`` (a real one on ``device``).
         realtime: pace the simulator in real time (a real sensor always is).
+        view: ``"view"`` (a Rerun window) or ``"serve"`` (a gRPC server for viewers to
+            connect to) on 127.0.0.1:``view_port``: the signals live, and the Allan deviation
+            so far every minute (:mod:`imupipe.report.rerun_live`).
 
     Raises:
         ImupipeError: bad options or a device that does not answer as an ADIS16364.
@@ -112,11 +117,20 @@ def record(
         frame_source = open_spi_source(device, config)
     else:
         raise ImupipeError(f"unknown source {source!r} (sim or spi)")
+    live = None
+    if view is not None:
+        if view not in ("view", "serve"):
+            raise ImupipeError(f"unknown view {view!r} (view or serve)")
+        from imupipe.report.rerun_live import open_live_view
+
+        frame_source = live = open_live_view(frame_source, view, view_port)
     n_frames = max(1, math.floor(seconds * frame_source.config.output_rate_hz + 0.5))
     with StageProgress(quiet=not progress) as bars, bars.stage("record", n_frames, "frames") as adv:
         summary = _run_recorder(
             Path(path), frame_source, n_frames, realtime=realtime or source == "spi", progress=adv
         )
+    if live is not None:
+        live.finish()
     if truth is not None:
         write_truth(Path(truth), frame_source.truth())
     return summary

@@ -73,11 +73,31 @@ def record(
     ),
     serial: Annotated[int, typer.Option(help="Serial number stored in the metadata.")] = 0,
     realtime: Annotated[bool, typer.Option(help="Pace the simulator in real time.")] = False,
+    view: Annotated[
+        bool,
+        typer.Option(
+            help="Open a Rerun window showing the signals live and the Allan deviation so far "
+            "(updated every minute)."
+        ),
+    ] = False,
+    serve: Annotated[
+        bool,
+        typer.Option(
+            help="As --view, but serve on 127.0.0.1:--view-port for "
+            "'rerun --connect rerun+http://127.0.0.1:PORT/proxy'."
+        ),
+    ] = False,
+    view_port: Annotated[int, typer.Option(min=1, max=65535)] = 9876,
     quiet: Quiet = False,
 ) -> None:
     """Record ADIS16364 frames into an MCAP file (default: the paper's 12 h static test)."""
     from imupipe.api import record as run_record
 
+    if serve and not quiet:
+        typer.echo(
+            f"live view: rerun --connect rerun+http://127.0.0.1:{view_port}/proxy",
+            err=True,
+        )
     summary = run_record(
         output,
         duration=duration,
@@ -90,6 +110,8 @@ def record(
         serial=serial,
         realtime=realtime,
         progress=not quiet,
+        view="serve" if serve else "view" if view else None,
+        view_port=view_port,
     )
     if not quiet:
         typer.echo(

@@ -221,3 +221,22 @@ def test_layout_and_names_come_before_the_data_and_long_runs_are_enveloped(
     full = write_rrd(synthetic_result(), frames, tmp_path / "full.rrd", full=True)
     assert _chunks(full)["/signals/accel"] == 20_000
     assert path.stat().st_size < full.stat().st_size / 3
+
+
+@pytest.mark.parametrize(("flags", "rows"), [((), 2_000), (("--rrd-full",), 6_000)])
+def test_analyze_writes_an_envelope_unless_rrd_full(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, flags: tuple[str, ...], rows: int
+) -> None:
+    """`imupipe analyze` (in process) on 6000 frames with 1000-bin envelopes."""
+    from test_cli import CONFIG, write_adis
+
+    from imupipe.cli import app
+    from imupipe.record.simulator import VirtualADIS16364
+
+    monkeypatch.setattr(rv, "ENVELOPE_BINS", 1_000)
+    run = write_adis(tmp_path / "run.mcap", VirtualADIS16364(CONFIG, None, seed=2).frames(6000))
+    out = tmp_path / "out"
+    args = ["analyze", str(run), "--no-loop", "-q", "--out", str(out), *flags]
+    assert app(args, standalone_mode=False) in (None, 0)
+    chunks = _chunks(out / "recording.rrd")
+    assert {chunks[f"/signals/{g}"] for g in ("gyro", "accel", "temperature", "supply")} == {rows}

@@ -127,8 +127,32 @@ def _means(frames: pl.DataFrame, columns: dict[str, list[str]]) -> dict[str, flo
     }
 
 
-def _series_name(column: str, unit: str, mean: float, centred: bool) -> str:
-    return f"{column} − mean ({mean:.6g} {unit})" if centred else f"{column} [{unit}]"
+def log_series_styles(
+    rec: rr.RecordingStream,
+    columns: dict[str, list[str]],
+    means: dict[str, float],
+    mean_note: str = "",
+) -> None:
+    """Series names, colours and MinMax aggregation (zoomed out, a plot keeps the extremes) of
+    the signal plots with ``columns`` (by title); a centred series is named with the mean that
+    is removed from it (``means``, followed by ``mean_note``)."""
+    for plot in SIGNAL_PLOTS:
+        names = columns.get(plot.title)
+        if not names:
+            continue
+        series = [
+            f"{c} − mean ({means[c]:.6g} {plot.unit}{mean_note})"
+            if plot.centred
+            else f"{c} [{plot.unit}]"
+            for c in names
+        ]
+        style = rr.SeriesLines(
+            names=series,
+            colors=[_color(c) for c in names],
+            widths=1.0,
+            aggregation_policy=rr.components.AggregationPolicy.MinMax,
+        )
+        rec.log(plot.entity, style, static=True)
 
 
 def _send_signals(
@@ -529,16 +553,7 @@ class RrdWriter:
             "imupipe", make_default=False, make_thread_default=False
         )
         rec.save(self.path)
-        for plot in SIGNAL_PLOTS:
-            if plot.title in columns:
-                names = columns[plot.title]
-                style = rr.SeriesLines(
-                    names=[_series_name(c, plot.unit, means[c], plot.centred) for c in names],
-                    colors=[_color(c) for c in names],
-                    widths=1.0,
-                    aggregation_policy=rr.components.AggregationPolicy.MinMax,
-                )
-                rec.log(plot.entity, style, static=True)
+        log_series_styles(rec, columns, means)
         rec.flush()  # the names before the data: log() is batched, send_columns() is not
         rec.send_blueprint(blueprint(None, self.groups, self.bin_s))
         self._sender = threading.Thread(
