@@ -125,12 +125,21 @@ def record(
 
         frame_source = live = open_live_view(frame_source, view, view_port)
     n_frames = max(1, math.floor(seconds * frame_source.config.output_rate_hz + 0.5))
-    with StageProgress(quiet=not progress) as bars, bars.stage("record", n_frames, "frames") as adv:
-        summary = _run_recorder(
-            Path(path), frame_source, n_frames, realtime=realtime or source == "spi", progress=adv
-        )
-    if live is not None:
-        live.finish()
+    try:
+        with (
+            StageProgress(quiet=not progress) as bars,
+            bars.stage("record", n_frames, "frames") as adv,
+        ):
+            summary = _run_recorder(
+                Path(path),
+                frame_source,
+                n_frames,
+                realtime=realtime or source == "spi",
+                progress=adv,
+            )
+    finally:
+        if live is not None:
+            live.finish()
     if truth is not None:
         write_truth(Path(truth), frame_source.truth())
     return summary

@@ -4,7 +4,9 @@
 to Rerun as SI signals, with the same entities, layout and series names as ``recording.rrd``
 (:mod:`imupipe.report.rerun_view`).  The overlapping Allan deviation of everything recorded so
 far, with its IEEE 952 fit, replaces the Allan views every :data:`ADEV_PERIOD_S` seconds of wall
-time, and once more at the end.  The user can watch the night's curve form.
+time, and once more at the end.  The user can watch the night's curve form.  The Allan
+deviation is computed on a thread of its own (its kernel releases the GIL), so the recorder never
+waits for it.
 
 The viewer is a separate ``rerun`` process bound to 127.0.0.1 (:func:`start_viewer`): either a
 window (``view``) or a gRPC server (``serve``).  A viewer connects to the server with
@@ -15,6 +17,7 @@ the user keeps what was streamed.
 from __future__ import annotations
 
 import subprocess
+import threading
 import time
 from typing import Literal
 
@@ -99,6 +102,7 @@ class LiveView:
         self._parts: dict[str, list[np.ndarray]] = {name: [] for name in AXES}
         self._offsets: dict[str, float] = {}
         self._last_adev = time.monotonic()
+        self._allan: threading.Thread | None = None
 
     def __getattr__(self, name: str):
         """Everything else (e.g. the simulator's ``truth()``) from the wrapped source."""
@@ -134,22 +138,24 @@ class LiveView:
             )
         for name in AXES:
             self._parts[name].append(frame[name].to_numpy())
-        if time.monotonic() - self._last_adev >= self._period:
-            self.update_allan()
+        due = time.monotonic() - self._last_adev >= self._period
+        if due and (self._allan is None or not self._allan.is_alive()):
+            self._last_adev = time.monotonic()
+            parts = {name: list(p) for name, p in self._parts.items()}
+            self._allan = threading.Thread(
+                target=self._draw_allan, args=(parts,), name="live-allan", daemon=True
+            )
+            self._allan.start()  # the recorder goes on: a real sensor must not wait
         return block
 
-    def update_allan(self) -> None:
-        """Replace the Allan views with the deviation and IEEE 952 fit of all frames so far.
-
-        τ0 is the nominal output period (the recording's own stamps are checked by
-        ``imupipe analyze``)."""
-        self._last_adev = time.monotonic()
-        ys = [np.concatenate(self._parts[name]) if self._parts[name] else None for name in AXES]
+    def _draw_allan(self, parts: dict[str, list[np.ndarray]]) -> None:
+        """Replace the Allan views with the deviation and IEEE 952 fit of the frames in
+        ``parts`` (blocks by axis).  τ0 is the nominal output period (``imupipe analyze``
+        checks the recording's own stamps)."""
+        ys = [np.concatenate(parts[name]) if parts[name] else None for name in AXES]
         n = 0 if ys[0] is None else len(ys[0])
         if n < MIN_FRAMES:
             return
-        for name, y in zip(AXES, ys, strict=True):
-            self._parts[name] = [y]
         curves = allan_curves(ys, self._tau0, tau_factors(n))
         axes = [
             axis_result(name, y, curve, self._tau0, None, None, loop=False)
@@ -168,7 +174,9 @@ class LiveView:
 
     def finish(self) -> None:
         """The Allan views of the whole recording; flush and disconnect (the viewer stays)."""
-        self.update_allan()
+        if self._allan is not None:
+            self._allan.join()
+        self._draw_allan(self._parts)
         self._rec.flush()
         self._rec.disconnect()
 
