@@ -1,6 +1,6 @@
 """An IMU noise generator from the IEEE Std 952-1997 PSD definitions, independent of imupipe.
 
-It shares no code with ``imupipe.record.simulator``/``noise`` and does not import imupipe: it is
+It shares no code with ``imupipe.recording.simulator``/``noise`` and does not import imupipe: it is
 the "data we did not write" of issue 13's validation (``benchmarks/loop_validation.py``).
 
 Noise of each axis (rate Ω in rad/s or m/s², sample interval τ0; IEEE 952 Annex C, two-sided

@@ -66,7 +66,9 @@ def analyze(
     if options.get("tmp_dir") is not None:
         options["tmp_dir"] = Path(options["tmp_dir"])
     analyze_options = AnalyzeOptions(**options)
-    outputs = ReportOutputs(out_dir, figures=analyze_options.figures)
+    outputs = ReportOutputs(
+        out_dir, figures=analyze_options.figures, rrd_full=analyze_options.rrd_full
+    )
     with StageProgress(quiet=not progress) as bars:
         return _run_analysis(Path(path), analyze_options, bars, outputs)
 
@@ -85,6 +87,8 @@ def record(
     serial: int = 0,
     realtime: bool = False,
     progress: bool = False,
+    view: str | None = None,
+    view_port: int = 9876,
 ) -> RecordSummary:
     """Record ADIS16364 frames into an MCAP file (default: the paper's 12 h static test).
 
@@ -99,6 +103,9 @@ def record(
         data_ready: ``CHIP:LINE`` of the GPIO wired to the sensor's DIO1 (e.g.
             ``/dev/gpiochip0:17``): a rate the sensor makes is then read on its data-ready edge.
         realtime: pace the simulator in real time (a real sensor always is).
+        view: ``"view"`` (a Rerun window) or ``"serve"`` (a gRPC server for viewers to
+            connect to) on 127.0.0.1:``view_port``: the signals live, and the Allan deviation
+            so far every minute (:mod:`imupipe.report.rerun_live`).
 
     Raises:
         ImupipeError: bad options or a device that does not answer as an ADIS16364.
@@ -122,11 +129,29 @@ def record(
         frame_source = open_spi_source(device, config, data_ready=data_ready)
     else:
         raise ImupipeError(f"unknown source {source!r} (sim or spi)")
+    live = None
+    if view is not None:
+        if view not in ("view", "serve"):
+            raise ImupipeError(f"unknown view {view!r} (view or serve)")
+        from imupipe.report.rerun_live import open_live_view
+
+        frame_source = live = open_live_view(frame_source, view, view_port)
     n_frames = max(1, math.floor(seconds * frame_source.config.output_rate_hz + 0.5))
-    with StageProgress(quiet=not progress) as bars, bars.stage("record", n_frames, "frames") as adv:
-        summary = _run_recorder(
-            Path(path), frame_source, n_frames, realtime=realtime or source == "spi", progress=adv
-        )
+    try:
+        with (
+            StageProgress(quiet=not progress) as bars,
+            bars.stage("record", n_frames, "frames") as adv,
+        ):
+            summary = _run_recorder(
+                Path(path),
+                frame_source,
+                n_frames,
+                realtime=realtime or source == "spi",
+                progress=adv,
+            )
+    finally:
+        if live is not None:
+            live.finish()
     if truth is not None:
         write_truth(Path(truth), frame_source.truth())
     return summary

@@ -81,11 +81,31 @@ def record(
     ] = None,
     serial: Annotated[int, typer.Option(help="Serial number stored in the metadata.")] = 0,
     realtime: Annotated[bool, typer.Option(help="Pace the simulator in real time.")] = False,
+    view: Annotated[
+        bool,
+        typer.Option(
+            help="Open a Rerun window showing the signals live and the Allan deviation so far "
+            "(updated every minute)."
+        ),
+    ] = False,
+    serve: Annotated[
+        bool,
+        typer.Option(
+            help="As --view, but serve on 127.0.0.1:--view-port for "
+            "'rerun --connect rerun+http://127.0.0.1:PORT/proxy'."
+        ),
+    ] = False,
+    view_port: Annotated[int, typer.Option(min=1, max=65535)] = 9876,
     quiet: Quiet = False,
 ) -> None:
     """Record ADIS16364 frames into an MCAP file (default: the paper's 12 h static test)."""
     from imupipe.api import record as run_record
 
+    if serve and not quiet:
+        typer.echo(
+            f"live view: rerun --connect rerun+http://127.0.0.1:{view_port}/proxy",
+            err=True,
+        )
     summary = run_record(
         output,
         duration=duration,
@@ -99,6 +119,8 @@ def record(
         serial=serial,
         realtime=realtime,
         progress=not quiet,
+        view="serve" if serve else "view" if view else None,
+        view_port=view_port,
     )
     if not quiet:
         typer.echo(
@@ -140,6 +162,13 @@ def analyze(
         ),
     ] = GapPolicy.longest,
     rrd: Annotated[bool, typer.Option(help="Write recording.rrd for the Rerun viewer.")] = True,
+    rrd_full: Annotated[
+        bool,
+        typer.Option(
+            help="Every raw frame in recording.rrd (default: a min/max envelope of 100 000 "
+            "bins once a recording has more than 200 000 frames)."
+        ),
+    ] = False,
     loop: Annotated[bool, typer.Option(help="Run the closed-loop effect search.")] = True,
     memory_budget_gb: Annotated[
         float,
@@ -169,6 +198,7 @@ def analyze(
         gaps=gaps.value,
         loop=loop,
         rrd=rrd,
+        rrd_full=rrd_full,
         memory_budget_bytes=round(memory_budget_gb * 1e9),
         tmp_dir=tmp_dir,
     )

@@ -56,6 +56,8 @@ class AnalyzeOptions:
     gaps: GapPolicy = "longest"
     loop: bool = True
     rrd: bool = True
+    rrd_full: bool = False
+    """Every raw frame in recording.rrd, not a min/max envelope (long recordings)."""
     figures: bool = True
     memory_budget_bytes: int = MEMORY_BUDGET_BYTES
     tmp_dir: Path | None = None

@@ -25,16 +25,17 @@ class ReportOutputs:
     """Writes the reports (and ``recording.rrd`` once :meth:`begin` was called) into
     ``out_dir``; implements :class:`imupipe.analysis.analyze.Outputs`."""
 
-    def __init__(self, out_dir: Path, figures: bool = True) -> None:
+    def __init__(self, out_dir: Path, figures: bool = True, rrd_full: bool = False) -> None:
         self.out_dir = Path(out_dir)
         self.figures = figures
+        self.rrd_full = rrd_full
         self.rrd: RrdWriter | None = None
 
     def begin(self, signals: pl.DataFrame) -> None:
         from imupipe.report.rerun_view import RrdWriter  # rerun-sdk only when asked for
 
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        self.rrd = RrdWriter(self.out_dir / "recording.rrd", signals)
+        self.rrd = RrdWriter(self.out_dir / "recording.rrd", signals, self.rrd_full)
 
     def finish(self, result: AnalysisResult, progress: StageProgress) -> None:
         with progress.stage("report", 2 if self.rrd else 1, "files") as advance:
