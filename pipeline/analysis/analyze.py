@@ -79,10 +79,13 @@ def axis_result(
     supply_d: np.ndarray | None,
     loop: bool,
 ) -> AxisResult:
-    """Stage 4 (+ loop) of one axis: mean, rms, IEEE 952 terms and the closed loop
-    (``temp_d``, ``supply_d``: the segment's temperature and supply as
-    :func:`imupipe.model.loop.aux_block_means`)."""
+    """Stage 4 (+ loop) of one axis: mean, rms, the closed loop and the final model (the
+    loop's, or the IEEE 952 fit without the loop) (``temp_d``, ``supply_d``: the segment's
+    temperature and supply as :func:`imupipe.model.loop.aux_block_means`)."""
     sensor = sensor_of(name)
+    looped = (
+        close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d), curve) if loop else None
+    )
     return AxisResult(
         name=name,
         sensor=sensor,
@@ -90,10 +93,8 @@ def axis_result(
         mean=float(y.mean()),
         rms=float(y.std()),
         curve=curve,
-        terms=fit_noise_terms(curve, sensor),
-        loop=close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d), curve)
-        if loop
-        else None,
+        terms=fit_noise_terms(curve, sensor) if looped is None else looped.terms_after,
+        loop=looped,
     )
 
 

@@ -85,6 +85,8 @@ def allan_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None
             if value is not None:
                 ax.plot(tau, value * np.sqrt(columns[:, j]), ls=_STYLES[symbol], color=color)
                 used.add(symbol)
+        ax.plot(tau, axis.terms.adev(tau), "-", color=color, lw=1.2, alpha=0.7)
+    ax.plot([], [], "-", color="0.3", label="final model (reported terms)")
     for symbol, style in _STYLES.items():
         if symbol in used:
             ax.plot([], [], ls=style, color="0.3", label=f"fitted {symbol} asymptote")

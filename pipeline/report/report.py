@@ -101,7 +101,7 @@ def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
         if axis.loop is None:
             continue
         model = jsonable(axis.loop.as_model_dict())
-        kinds = ", ".join(e["kind"] for e in axis.loop.as_effects()) or "none"
+        kinds = ", ".join(e.kind for e in axis.loop.accepted) or "none"
         tau_max = _before_after(model, "tau_max_abs_z")
         rows.append(
             (
@@ -294,12 +294,12 @@ def _loop_details(result: AnalysisResult) -> list[str]:
         if axis.loop is None:
             continue
         md += [f"### {axis.name}", ""]
-        for effect in jsonable(axis.loop.as_effects()):
+        for effect in jsonable(axis.loop.accepted):
             md.append(
                 f"- accepted **{effect['kind']}** ({_params(effect)}): error "
                 f"{_fmt(effect.get('error_before'))} → {_fmt(effect.get('error_after'))}"
             )
-        for cand in jsonable(axis.loop.as_candidates()):
+        for cand in jsonable(axis.loop.rejected):
             md.append(f"- rejected candidate {cand.get('kind')}: {cand.get('reason', '')}".rstrip())
         before, after = axis.loop.terms_before, axis.loop.terms_after
         rows = []
