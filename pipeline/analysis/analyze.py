@@ -47,6 +47,7 @@ class AnalyzeOptions:
     rrd: bool = True
     figures: bool = True
     memory_budget_bytes: int = MEMORY_BUDGET_BYTES
+    datasheet: Path | None = None  # TOML of the part's noise specs (imupipe.report.datasheet)
 
 
 def housekeeping(frames: pl.DataFrame, name: str) -> np.ndarray | None:
@@ -184,10 +185,12 @@ def write_outputs(
     rrd: RrdWriter | None,
 ) -> None:
     """report.json/.md, figures, allan.parquet, imu.yaml, and the rrd's analysis views."""
+    from imupipe.report.datasheet import load_datasheet
     from imupipe.report.report import write_report
 
+    sheet = load_datasheet(options.datasheet) if options.datasheet is not None else None
     with progress.stage("report", 2 if rrd else 1, "files") as advance:
-        write_report(result, out_dir, figures=options.figures)
+        write_report(result, out_dir, figures=options.figures, datasheet=sheet)
         advance(1)
         if rrd:
             rrd.finish(result)
