@@ -410,6 +410,17 @@ def cutoff_grid(tau: np.ndarray) -> np.ndarray:
     return np.concatenate([np.geomspace(0.05 / tau[-1], 10.0 / tau[0], 25), [np.inf]])
 
 
+def avar_upper(avar: np.ndarray, edf: np.ndarray, level: float = 0.95) -> np.ndarray:
+    """Upper end of the two-sided ``level`` chi-square interval of AVAR estimates ``avar`` with
+    ``edf`` degrees of freedom: avar·ν/χ²_ν((1 − level)/2) (u²; NaN where ν is unknown).  The
+    bound every noise term's asymptote is held below (:func:`asymptote_caps`,
+    :func:`flicker_limit`): a 95 % bound, not the curve's 68.3 % error bars, since the lowest of
+    some 50 correlated points is compared."""
+    nu = np.asarray(edf, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return np.asarray(avar, dtype=float) * nu / special.chdtri(nu, 0.5 + level / 2)
+
+
 def flicker_limit(avar_hi: np.ndarray) -> float:
     """Largest B² (u²) whose plateau (2 ln2/π) B² stays below the lowest upper confidence
     bound ``avar_hi`` of the measured AVAR (non-finite bounds ignored)."""
@@ -744,12 +755,12 @@ def fit_noise_terms(curve: AllanCurve, sensor: Literal["gyro", "accel"]) -> Nois
 
     Weights from :func:`monotone_edf`; the fit starts at the τ chosen by :func:`fit_start`
     (reported in ``fit_tau_min_s`` and ``fit_note``); B is kept possible
-    (:func:`flicker_limit`) and every upper bound below the measured curve
+    (:func:`flicker_limit`) and every upper bound below the measured curve's 95 % upper bound
     (:func:`asymptote_caps`).
     """
     avar = np.asarray(curve.adev, dtype=float) ** 2
-    avar_hi = np.asarray(curve.adev_hi, dtype=float) ** 2
     tau = np.asarray(curve.tau_s, dtype=float)
     edf = monotone_edf(curve.edf)
+    avar_hi = avar_upper(avar, edf)
     fit, note = _start_fit(tau, avar, edf, None, 0.999, True, flicker_limit(avar_hi))
     return terms_from_fit(fit, avar, edf, sensor, note, avar_hi)

@@ -280,7 +280,7 @@ class _Axis:
         self.tau = np.asarray(curve.tau_s, dtype=float)
         self.edf = ieee952.monotone_edf(curve.edf)
         self.avar = np.asarray(curve.adev, dtype=float) ** 2
-        self.hi_ratio = (np.asarray(curve.adev_hi, dtype=float) / np.asarray(curve.adev)) ** 2
+        self.hi_ratio = ieee952.avar_upper(1.0, self.edf)
         self.tau_min, self.fit_note = ieee952.fit_start(
             self.tau,
             self.avar,
@@ -297,10 +297,10 @@ class _Axis:
         self.m_d = m_d[valid]
 
     def avar_hi(self, avar: np.ndarray) -> np.ndarray:
-        """Upper confidence bound that a model of a (corrected) AVAR curve must respect: the
-        lower of the measured curve's and the corrected curve's (the measured interval ratio;
-        the edf does not change with a correction).  A bound is consistent with both curves the
-        report draws."""
+        """95 % upper confidence bound (:func:`ieee952.avar_upper`) that a model of a
+        (corrected) AVAR curve must respect: the lower of the measured curve's and the corrected
+        curve's (the edf does not change with a correction), so a bound is consistent with both
+        curves the report draws."""
         return np.minimum(avar, self.avar) * self.hi_ratio
 
     def corrected_avar(self, state: _State, cand: effects.Candidate) -> np.ndarray:
