@@ -10,7 +10,8 @@ with the curve), the loop's error before → after and where the fit starts and 
     python benchmarks/real_final_model.py [reference_dir] [--write-test-data tests/data/F.json]
 
 ``--write-test-data`` stores the few numbers tests/test_final_model.py needs: per axis the
-Allan curve (tau, adev, adev_hi, edf) and the final model's terms, as report.json states them.
+Allan curve (tau, adev, edf; adev after the loop's corrections) to 7 digits and the final
+model's terms, as report.json states them.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 
 from imupipe.analysis.analyze import axis_result
 from imupipe.analysis.results import jsonable
-from imupipe.model.ieee952 import design_columns
+from imupipe.model.ieee952 import avar_upper, design_columns, monotone_edf
 from imupipe.stats.allan import allan_curves, tau_factors
 from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
 from imupipe.vocab import TERM_NAMES
@@ -48,6 +49,11 @@ def recordings(ref: Path) -> dict[str, tuple[dict[str, np.ndarray], float]]:
     return out
 
 
+def _digits(x: np.ndarray) -> list[float]:
+    """7 significant digits (the stored curves stay small)."""
+    return [float(f"{v:.7g}") for v in np.asarray(x, dtype=float)]
+
+
 def main() -> None:
     args = sys.argv[1:]
     target = None
@@ -63,7 +69,7 @@ def main() -> None:
             (curve,) = allan_curves([y], tau0, m)
             axis = axis_result(name, y, curve, tau0, None, None, loop=True)
             tau = np.asarray(curve.tau_s)
-            hi = np.asarray(curve.adev_hi)
+            hi = np.sqrt(avar_upper(np.asarray(curve.adev) ** 2, monotone_edf(curve.edf)))
             final = axis.terms
             b = final.bias_instability
             lowest = float(np.nanmin(hi))
@@ -80,21 +86,23 @@ def main() -> None:
             print(
                 f"{rec:16s} {name:8s} B {b.value if b.value is not None else b.hi:.3g} "
                 f"({'fitted' if b.value is not None else 'bound'}) plateau "
-                f"{plateau if plateau is not None else float('nan'):.3g} <= lowest adev_hi "
+                f"{plateau if plateau is not None else float('nan'):.3g} <= lowest 95 % bound "
                 f"{lowest:.3g}: {plateau is None or plateau <= lowest}; unresolved asymptote / "
-                f"adev_hi max {worst:.3f}; error {loop.before.error:.3g} -> {loop.after.error:.3g}"
+                f"bound max {worst:.3f}; error {loop.before.error:.3g} -> {loop.after.error:.3g}"
                 f"; effects {[e.kind for e in loop.accepted]}"
             )
             print(f"    fit: {final.fit_note}")
             stored[f"{rec}/{name}"] = jsonable(
                 {
                     "sensor": axis.sensor,
-                    "tau_s": curve.tau_s,
-                    "adev": curve.adev,
-                    "adev_hi": curve.adev_hi,
-                    "edf": curve.edf,
+                    "tau_s": _digits(curve.tau_s),
+                    "adev": _digits(curve.adev),
+                    "edf": _digits(curve.edf),
+                    "adev_after": _digits(loop.adev_after),
                     "final": {"ieee952": final.as_dict(), "fit": final.fit_summary()},
-                    "baseline_fit": axis.baseline.fit_summary(),
+                    "effects": [e.kind for e in loop.accepted],
+                    "error_before": loop.before.error,
+                    "error_after": loop.after.error,
                 }
             )
     if target is not None:

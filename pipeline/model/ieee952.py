@@ -695,7 +695,7 @@ def terms_from_fit(
     for j, (name, unit) in enumerate(zip(TERM_NAMES, TERM_UNITS[sensor], strict=True)):
         lo, hi = fit.profile_interval(avar, edf, j)
         capped = caps[j] < hi
-        hi = max(min(hi, caps[j]), float(fit.coef[j]))
+        hi = min(hi, caps[j])  # an unresolved term: at most what the curve allows
         if j == 0 and fit.short_sign < 0:
             prefilter = float(3.0 * fit.coef[0])
             reason = (
@@ -704,8 +704,9 @@ def terms_from_fit(
                 "correlated by the sensor's prefilter; quantisation cannot be separated from it"
             )
             terms[name] = NoiseTerm(None, None, None, unit, reason)
-        elif lo > 0:
+        elif lo > 0:  # a resolved term's interval keeps its value
             value = float(np.sqrt(fit.coef[j]))
+            hi = max(hi, float(fit.coef[j]))
             terms[name] = NoiseTerm(value, float(np.sqrt(lo)), float(np.sqrt(hi)), unit, misfit)
         else:
             how = (
