@@ -174,7 +174,9 @@ def analyze(
     ] = None,
     combine: CombineOption = Combine.worst,
     inflate: InflateOption = 1.0,
-    export_rate: RateOption = None,
+    export_rate: Annotated[
+        float | None, typer.Option(help="Filter/driver rate, Hz, for the exports.")
+    ] = None,
     quiet: Quiet = False,
 ) -> None:
     """Analyse a recording: Allan deviation, IEEE 952 terms, effects; write reports."""

@@ -693,9 +693,9 @@ def terms_from_fit(
     )
     terms, prefilter = {}, 0.0
     for j, (name, unit) in enumerate(zip(TERM_NAMES, TERM_UNITS[sensor], strict=True)):
-        lo, hi = fit.profile_interval(avar, edf, j)
-        capped = caps[j] < hi
-        hi = min(hi, caps[j])  # an unresolved term: at most what the curve allows
+        lo, hi_profile = fit.profile_interval(avar, edf, j)
+        capped = caps[j] < hi_profile
+        hi = min(hi_profile, caps[j])  # an unresolved term: at most what the curve allows
         if j == 0 and fit.short_sign < 0:
             prefilter = float(3.0 * fit.coef[0])
             reason = (
@@ -704,10 +704,14 @@ def terms_from_fit(
                 "correlated by the sensor's prefilter; quantisation cannot be separated from it"
             )
             terms[name] = NoiseTerm(None, None, None, unit, reason)
-        elif lo > 0:  # a resolved term's interval keeps its value
+        elif lo > 0:
+            # a resolved term's interval: the profile's; B's is also held to a possible plateau
+            # (others may lie above the curve where the negative prefilter term offsets them)
             value = float(np.sqrt(fit.coef[j]))
-            hi = max(hi, float(fit.coef[j]))
-            terms[name] = NoiseTerm(value, float(np.sqrt(lo)), float(np.sqrt(hi)), unit, misfit)
+            if j == 2:
+                hi_profile = max(hi, float(fit.coef[j]))
+            hi = float(np.sqrt(hi_profile))
+            terms[name] = NoiseTerm(value, float(np.sqrt(lo)), hi, unit, misfit)
         else:
             how = (
                 "its asymptote reaches the measured deviation's upper confidence bound"
