@@ -24,6 +24,12 @@ Every fit uses the policy of :func:`ieee952.fit_noise_terms` (weights from
 1/τ² column), and the fitted τ range is fixed for the whole loop: every error before/after is a
 deviance over the same τ points, and the loop's terms before equal the reported IEEE 952 terms.
 
+The loop's records are frozen dataclasses (:class:`Trial`, :class:`Decision`,
+:class:`AcceptedEffect`, :class:`RejectedCandidate`), serialised for report.json by
+:func:`imupipe.analysis.results.jsonable`.  ``terms_after`` is the FINAL model every report shows:
+the IEEE 952 terms of the last fit (bounds held under the curve, B possible) and the accepted AVAR
+effects (:class:`ieee952.EffectTerm`); its model curve is exactly those terms.
+
 Everything after the baseline works on the τ grid and on ~1 s block means, so a 12 h / 100 Hz
 axis costs a fraction of a second; only spikes (full-rate) and the AVAR-term hold-out (half
 curves) touch the full series, and only when those candidates are already significant.
@@ -181,23 +187,21 @@ class _State:
     avar_d: np.ndarray | None = None  # AVAR of y_d at the decimated factors (cache)
     effect_parameters: dict[str, float] = field(default_factory=dict)  # shape of each column
 
-    def fit(self, ax: _Axis) -> ieee952.CompositeFit:
+    def fit(self, ax: _Axis, possible_b: bool = False) -> ieee952.CompositeFit:
+        """The composite fit of this state; ``possible_b``: with B held to a plateau under
+        the curve (:func:`ieee952.flicker_limit`) — the reported model.  The loop's decisions
+        use the free fit (the constraint would move part of an unmodelled effect's hump from
+        B into the candidate being judged)."""
+        limit = ieee952.flicker_limit(ax.avar_hi(self.avar)) if possible_b else np.inf
         return _fit(
-            ax.tau,
-            self.avar,
-            ax.edf,
-            ax.tau_min,
-            self.columns,
-            None,
-            self.n_nonlinear,
-            ieee952.flicker_limit(ax.avar_hi(self.avar)),
+            ax.tau, self.avar, ax.edf, ax.tau_min, self.columns, None, self.n_nonlinear, limit
         )
 
-    def terms(self, ax: _Axis, fit: ieee952.CompositeFit) -> ieee952.NoiseTerms:
-        """The model of ``fit`` as reported: IEEE 952 terms (bounds capped by this state's
-        curve) and the accepted AVAR effects."""
+    def terms(self, ax: _Axis) -> ieee952.NoiseTerms:
+        """The model of this state as reported: the IEEE 952 terms of its fit with B possible
+        (bounds capped by this state's curve) and the accepted AVAR effects."""
         return ieee952.terms_from_fit(
-            fit,
+            self.fit(ax, possible_b=True),
             self.avar,
             ax.edf,
             ax.sig.sensor,
@@ -281,12 +285,7 @@ class _Axis:
         self.edf = ieee952.monotone_edf(curve.edf)
         self.avar = np.asarray(curve.adev, dtype=float) ** 2
         self.hi_ratio = ieee952.avar_upper(1.0, self.edf)
-        self.tau_min, self.fit_note = ieee952.fit_start(
-            self.tau,
-            self.avar,
-            self.edf,
-            flicker_max=ieee952.flicker_limit(self.avar_hi(self.avar)),
-        )
+        self.tau_min, self.fit_note = ieee952.fit_start(self.tau, self.avar, self.edf)
         self.block = block_size(len(sig.y), sig.tau0)
         self.dt = self.block * sig.tau0
         self.y_d = effects.block_means(sig.y, self.block)
@@ -404,7 +403,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
     state = _State(ax.avar, ax.y_d.copy(), None)
     fit0 = state.fit(ax)
     good0 = goodness(fit0, tau, state.avar, edf)
-    terms0 = state.terms(ax, fit0)
+    terms0 = state.terms(ax)
     accepted: list[AcceptedEffect] = []
     rejected: dict[str, RejectedCandidate] = {}
     fit, good = fit0, good0
@@ -422,7 +421,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         new_good = goodness(new_fit, tau, state.avar, edf)
         accepted.append(chosen.accepted(good.error, new_good.error))
         fit, good = new_fit, new_good
-    terms1 = terms0 if fit is fit0 else state.terms(ax, fit)
+    terms1 = terms0 if fit is fit0 else state.terms(ax)
     return LoopResult(
         name=signals.name,
         tau_s=tau,
