@@ -285,7 +285,12 @@ class _Axis:
         self.edf = ieee952.monotone_edf(curve.edf)
         self.avar = np.asarray(curve.adev, dtype=float) ** 2
         self.hi_ratio = ieee952.avar_upper(1.0, self.edf)
-        self.tau_min, self.fit_note = ieee952.fit_start(self.tau, self.avar, self.edf)
+        self.tau_min, self.fit_note = ieee952.fit_start(  # as fit_noise_terms: B possible
+            self.tau,
+            self.avar,
+            self.edf,
+            flicker_max=ieee952.flicker_limit(self.avar_hi(self.avar)),
+        )
         self.block = block_size(len(sig.y), sig.tau0)
         self.dt = self.block * sig.tau0
         self.y_d = effects.block_means(sig.y, self.block)
