@@ -78,7 +78,7 @@ def main() -> None:
                 aux_block_means(temp, tau0),
                 aux_block_means(supply, tau0),
             )
-            accepted = [e["kind"] for e in close_loop(sig, curve).as_effects()]
+            accepted = [e.kind for e in close_loop(sig, curve).accepted]
             kinds.update(accepted)
             per_axis[axis] += bool(accepted)
             hits += bool(accepted)

@@ -60,14 +60,17 @@ def analyze(
     if unknown:
         known = sorted(_ANALYZE_OPTIONS)
         raise ImupipeError(f"unknown analyze option(s) {unknown}; known: {known}")
+    from imupipe.report.datasheet import load_datasheet
     from imupipe.report.outputs import ReportOutputs
 
     out_dir = Path(out) if out is not None else default_out_dir(path)
-    if options.get("tmp_dir") is not None:
-        options["tmp_dir"] = Path(options["tmp_dir"])
+    for name in ("tmp_dir", "datasheet"):
+        if options.get(name) is not None:
+            options[name] = Path(options[name])
     analyze_options = AnalyzeOptions(**options)
+    sheet = None if analyze_options.datasheet is None else load_datasheet(analyze_options.datasheet)
     outputs = ReportOutputs(
-        out_dir, figures=analyze_options.figures, rrd_full=analyze_options.rrd_full
+        out_dir, figures=analyze_options.figures, rrd_full=analyze_options.rrd_full, datasheet=sheet
     )
     with StageProgress(quiet=not progress) as bars:
         return _run_analysis(Path(path), analyze_options, bars, outputs)

@@ -1,4 +1,4 @@
-"""The ``imupipe`` command line: record, info, analyze, view, demo.
+"""The ``imupipe`` command line: record, info, analyze, export, view, demo.
 
 Bad input never produces a traceback: every :class:`~imupipe.errors.ImupipeError` becomes one
 line on stderr and exit code 2.  Set ``IMUPIPE_DEBUG=1`` to see tracebacks of internal errors.
@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
@@ -17,6 +17,7 @@ from typing import Annotated
 import typer
 
 from imupipe.errors import ImupipeError
+from imupipe.report.exports import FORMATS, ExportOptions, check_options, write_exports
 
 app = typer.Typer(
     add_completion=False,
@@ -37,6 +38,29 @@ class GapPolicy(StrEnum):
     longest = "longest"
     fail = "fail"
     mask = "mask"
+
+
+class Combine(StrEnum):
+    worst = "worst"
+    mean = "mean"
+
+
+ExportFormat = StrEnum("ExportFormat", {n: n for n in (*FORMATS, "all")})
+"""``--export`` / ``--format``: a format of :data:`imupipe.report.exports.FORMATS`, or all."""
+CombineOption = Annotated[
+    Combine,
+    typer.Option(help="One value per sensor where a format takes one: worst axis or mean."),
+]
+InflateOption = Annotated[
+    float,
+    typer.Option(help="Factor on every exported noise strength (variances: its square)."),
+]
+RateOption = Annotated[
+    float | None,
+    typer.Option(
+        "--rate", help="Filter/driver rate, Hz, for discrete formats (default: the recording's)."
+    ),
+]
 
 
 ALL_TOPICS = "all"
@@ -185,13 +209,37 @@ def analyze(
             "(~65 bytes a frame; default: the system's temporary directory; removed after).",
         ),
     ] = None,
+    datasheet: Annotated[
+        Path | None,
+        typer.Option(
+            help="TOML of the part's noise specs (N, B, K, rms per sensor with units) "
+            "shown next to the measured terms; default: the ADIS16364's for its "
+            "recordings."
+        ),
+    ] = None,
+    export: Annotated[
+        list[ExportFormat] | None,
+        typer.Option(help="Also write this filter's noise file (repeatable; see imupipe export)."),
+    ] = None,
+    combine: CombineOption = Combine.worst,
+    inflate: InflateOption = 1.0,
+    export_rate: Annotated[
+        float | None, typer.Option(help="Filter/driver rate, Hz, for the exports.")
+    ] = None,
     quiet: Quiet = False,
 ) -> None:
     """Analyse a recording: Allan deviation, IEEE 952 terms, effects; write reports."""
     from imupipe.analysis.analyze import AnalyzeOptions
     from imupipe.api import default_out_dir
+    from imupipe.report.datasheet import load_datasheet
 
     out_dir = out if out is not None else default_out_dir(path)
+    if datasheet is not None:
+        load_datasheet(datasheet)  # a bad file fails now, not after the analysis
+    exporting = _ExportRequest(
+        [f.value for f in export or []], ExportOptions(combine.value, inflate, export_rate)
+    )
+    exporting.check()
     options = AnalyzeOptions(
         topic=topic,
         taus_per_decade=taus_per_decade,
@@ -201,9 +249,10 @@ def analyze(
         rrd_full=rrd_full,
         memory_budget_bytes=round(memory_budget_gb * 1e9),
         tmp_dir=tmp_dir,
+        datasheet=datasheet,
     )
     if topic != ALL_TOPICS:
-        _analyze_one(path, out_dir, options, quiet)
+        _analyze_one(path, out_dir, options, quiet, exporting)
         return
     from imupipe.io.info import imu_topics
 
@@ -214,7 +263,7 @@ def analyze(
         if not quiet:
             typer.echo(f"== {name} -> {sub}/")
         try:
-            _analyze_one(path, sub, replace(options, topic=name), quiet)
+            _analyze_one(path, sub, replace(options, topic=name), quiet, exporting)
         except ImupipeError as exc:
             _warn(f"topic {name}: {exc}")
             failed.append(name)
@@ -224,17 +273,64 @@ def analyze(
         )
 
 
-def _analyze_one(path: Path, out_dir: Path, options, quiet: bool) -> None:
-    """Analyse one IMU topic into ``out_dir``; print its warnings and table."""
+@dataclass(frozen=True)
+class _ExportRequest:
+    """The exports asked of ``analyze`` (``--export``) and their options."""
+
+    formats: list[str]
+    options: ExportOptions
+
+    def check(self) -> None:
+        """Reject bad options before the analysis runs."""
+        check_options(self.options)
+
+    def write(self, result, out_dir: Path) -> list[Path]:
+        if not self.formats:
+            return []
+        return write_exports(result.to_dict(), self.formats, out_dir, self.options)
+
+
+def _analyze_one(
+    path: Path, out_dir: Path, options, quiet: bool, exporting: _ExportRequest
+) -> None:
+    """Analyse one IMU topic into ``out_dir``; print its warnings and table; write exports."""
     from imupipe.api import analyze as run_analyze
+    from imupipe.report.datasheet import load_datasheet
     from imupipe.report.report import format_table
 
     result = run_analyze(path, out_dir, progress=not quiet, **asdict(options))
+    written = exporting.write(result, out_dir)
     for w in result.input.warnings:
         _warn(w)
     if not quiet:
-        typer.echo(format_table(result))
+        sheet = load_datasheet(options.datasheet) if options.datasheet else None
+        typer.echo(format_table(result, sheet))
+        for p in written:
+            typer.echo(f"export: {p}")
         typer.echo(f"reports written to {out_dir}/")
+
+
+@app.command("export")
+def export_cmd(
+    result_dir: Annotated[Path, typer.Argument(help="Output folder of imupipe analyze.")],
+    format: Annotated[
+        list[ExportFormat],
+        typer.Option("--format", "-f", help="Filter format (repeatable; 'all': every one)."),
+    ],
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Folder to write into (default: RESULT_DIR).")
+    ] = None,
+    combine: CombineOption = Combine.worst,
+    inflate: InflateOption = 1.0,
+    rate: RateOption = None,
+) -> None:
+    """Write the final noise model as a filter's noise file (Kalibr, OpenVINS, VINS-Fusion,
+    ORB-SLAM3, Basalt, GTSAM, sensor_msgs/Imu covariances)."""
+    from imupipe.report.exports import export_result_dir
+
+    options = ExportOptions(combine.value, inflate, rate)
+    for path in export_result_dir(result_dir, [f.value for f in format], out, options):
+        typer.echo(f"{path}")
 
 
 @app.command()
@@ -284,6 +380,11 @@ def demo(
         rrd=True,
         loop=True,
         quiet=quiet,
+        datasheet=None,
+        export=None,
+        combine=Combine.worst,
+        inflate=1.0,
+        export_rate=None,
     )
 
 

@@ -40,3 +40,11 @@ class SelfTestError(DeviceError):
 
 class ViewerError(ImupipeError):
     """No Rerun recording to show, or no Rerun viewer to show it with."""
+
+
+class DatasheetError(ImupipeError):
+    """A datasheet TOML file (N, B, K, rms per sensor with units) that cannot be read."""
+
+
+class ExportError(ImupipeError):
+    """A result folder or option an export cannot use."""

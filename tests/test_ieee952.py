@@ -143,7 +143,7 @@ def test_prefilter_term_exact_and_fit_starts_where_it_holds():
     assert not np.allclose(avar[m == 2], n2 / tau[m == 2] - c / tau[m == 2] ** 2, rtol=1e-3)
     terms = ieee952.fit_noise_terms(allan_like(tau, np.sqrt(avar), np.full_like(tau, 1e5)), "gyro")
     assert terms.fit_tau_min_s == pytest.approx(4 * tau0)
-    assert "0.01, 0.02 s rejected" in terms.fit_note
+    assert "tau = 0.01, 0.02 s left out" in terms.fit_note
     assert terms.random_walk.value == pytest.approx(np.sqrt(n2), rel=1e-4)
     assert terms.prefilter_avar_s2 == pytest.approx(c, rel=1e-3)
     assert terms.quantization.value is None and "prefilter" in terms.quantization.reason
@@ -271,9 +271,11 @@ def test_fit_noise_terms_is_fit_start_then_fit_composite():
     terms = ieee952.fit_noise_terms(curve, "gyro")
     avar, tau = np.asarray(curve.adev) ** 2, np.asarray(curve.tau_s)
     edf = ieee952.monotone_edf(curve.edf)
-    tau_min, note = ieee952.fit_start(tau, avar, edf)
-    fit = ieee952.fit_composite(tau, avar, edf, tau_min=tau_min, prefilter=True)
-    assert terms == ieee952.terms_from_fit(fit, avar, edf, "gyro", note)
+    avar_hi = ieee952.avar_upper(avar, edf)
+    limit = ieee952.flicker_limit(avar_hi)
+    tau_min, note = ieee952.fit_start(tau, avar, edf, flicker_max=limit)
+    fit = ieee952.fit_composite(tau, avar, edf, tau_min=tau_min, prefilter=True, flicker_max=limit)
+    assert terms == ieee952.terms_from_fit(fit, avar, edf, "gyro", note, avar_hi)
 
 
 CHI2_1DOF_95 = 3.841458820694124  # χ²₁ 95 % quantile (NIST/SEMATECH table: 3.841)

@@ -34,10 +34,10 @@ def base(seed):
 def test_clean_axis_accepts_nothing(seed):
     rng, y = base(seed)
     res = run(y, temperature(N, rng))
-    assert res.as_effects() == []
+    assert res.accepted == []
     # candidates were tried and each was turned down with its reason
-    assert {c["kind"] for c in res.as_candidates()} >= {"temperature", "bias_step"}
-    assert all(c["reason"] for c in res.as_candidates())
+    assert {c.kind for c in res.rejected} >= {"temperature", "bias_step"}
+    assert all(c.reason for c in res.rejected)
     assert res.before.p_value > 0.01  # the baseline model is adequate on a clean axis
 
 
@@ -46,14 +46,14 @@ def test_temperature_coupling_found_and_regressed_out():
     temp = temperature(N, rng)
     k_true = 4e-4  # rad/s per °C
     res = run(y + k_true * (temp - temp.mean()), temp)
-    kinds = [e["kind"] for e in res.as_effects()]
+    kinds = [e.kind for e in res.accepted]
     assert kinds[0] == "temperature"
-    eff = res.as_effects()[0]
-    lo, hi = eff["intervals"]["coefficient"]
+    eff = res.accepted[0]
+    lo, hi = eff.intervals["coefficient"]
     assert lo < k_true < hi
     # judged in the time domain; the AVAR deviance may only not rise significantly (loop rule)
-    rise = (eff["error_after"] - eff["error_before"]) * res.before.dof
-    assert rise <= CHI2_95 * max(1.0, eff["error_before"])
+    rise = (eff.error_after - eff.error_before) * res.before.dof
+    assert rise <= CHI2_95 * max(1.0, eff.error_before)
 
 
 def test_sinusoid_found_with_frequency_and_amplitude():
@@ -61,8 +61,8 @@ def test_sinusoid_found_with_frequency_and_amplitude():
     f0, amp = 0.02, 3e-3
     t = np.arange(N) * TAU0
     res = run(y + amp * np.sin(2 * np.pi * f0 * t + 0.3))
-    eff = res.as_effects()[0]
-    assert eff["kind"] == "sinusoid"
-    assert eff["intervals"]["frequency_hz"][0] < f0 < eff["intervals"]["frequency_hz"][1]
-    assert eff["intervals"]["amplitude"][0] < amp < eff["intervals"]["amplitude"][1]
+    eff = res.accepted[0]
+    assert eff.kind == "sinusoid"
+    assert eff.intervals["frequency_hz"][0] < f0 < eff.intervals["frequency_hz"][1]
+    assert eff.intervals["amplitude"][0] < amp < eff.intervals["amplitude"][1]
     assert res.after.error < res.before.error

@@ -23,7 +23,7 @@ from imupipe.device.adis16364 import (
     burst_counts,
 )
 from imupipe.model.effects import CHI2_95, gauss_markov_avar
-from imupipe.model.loop import AxisSignals, LoopResult, aux_block_means, close_loop
+from imupipe.model.loop import AcceptedEffect, AxisSignals, LoopResult, aux_block_means, close_loop
 from imupipe.recording.scenario import (
     AXES,
     BiasStep,
@@ -109,7 +109,7 @@ def loop_results(
 
 def found(
     name: str, seed: int, axis: str, kind: str, hours: float = HOURS, rate_hz: float = RATE_HZ
-) -> tuple[dict, LoopResult]:
+) -> tuple[AcceptedEffect, LoopResult]:
     """The accepted effect: ``kind`` on ``axis`` and nothing on the other axes.
 
     AVAR terms and spikes must lower the AVAR error.  A slow time-domain correction (coupling,
@@ -117,23 +117,23 @@ def found(
     significantly: ΔD ≤ φ·χ²₁(0.95), φ = max(1, D/dof) before.
     """
     results = loop_results(name, seed, hours, rate_hz)
-    accepted = {a: [e["kind"] for e in r.as_effects()] for a, r in results.items()}
+    accepted = {a: [e.kind for e in r.accepted] for a, r in results.items()}
     assert accepted[axis][:1] == [kind], accepted
     assert not any(v for a, v in accepted.items() if a != axis), accepted
     res = results[axis]
-    effect = res.as_effects()[0]
+    effect = res.accepted[0]
     if kind in ("sinusoid", "gauss_markov", "spike"):
-        assert effect["error_after"] < effect["error_before"]
+        assert effect.error_after < effect.error_before
         assert res.after.error < res.before.error
     else:
-        rise = (effect["error_after"] - effect["error_before"]) * res.before.dof
-        assert rise <= CHI2_95 * max(1.0, effect["error_before"]), (effect, rise)
+        rise = (effect.error_after - effect.error_before) * res.before.dof
+        assert rise <= CHI2_95 * max(1.0, effect.error_before), (effect, rise)
     return effect, res
 
 
-def inside(effect: dict, param: str, truth: float) -> None:
-    lo, hi = effect["intervals"][param]
-    assert lo <= truth <= hi, (param, truth, lo, hi, effect["params"][param])
+def inside(effect: AcceptedEffect, param: str, truth: float) -> None:
+    lo, hi = effect.intervals[param]
+    assert lo <= truth <= hi, (param, truth, lo, hi, effect.params[param])
 
 
 def closer(before, after, truth: float) -> bool:
@@ -221,11 +221,11 @@ def test_warmup_drift(seed):
 @pytest.mark.parametrize("seed", SEEDS)
 def test_spikes(seed):
     effect, _ = found("spike", seed, "accel_z", "spike")
-    assert effect["params"]["size"] == pytest.approx(60 * MG, rel=0.05)
+    assert effect.params["size"] == pytest.approx(60 * MG, rel=0.05)
 
 
 @pytest.mark.parametrize("seed", [21, 22])
 def test_clean_recording_accepts_nothing(seed):
     for axis, res in loop_results("clean", seed).items():
-        assert res.as_effects() == [], axis
+        assert res.accepted == [], axis
         assert res.after.error == res.before.error

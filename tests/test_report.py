@@ -14,7 +14,9 @@ import pytest
 from scipy.stats import chi2
 
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
+from imupipe.device.frame_schema import SCHEMA_NAME
 from imupipe.model import ieee952
+from imupipe.model.loop import AcceptedEffect, Goodness, RejectedCandidate
 from imupipe.report.report import format_table, kalibr_yaml, write_report
 from imupipe.stats import allan
 from imupipe.units import SI_UNIT, from_si, to_si
@@ -88,7 +90,11 @@ class StandInLoop:
     model_adev_after: np.ndarray
     z_before: np.ndarray
     z_after: np.ndarray
-    effects: list[dict] = field(default_factory=list)
+    accepted: list[AcceptedEffect] = field(default_factory=list)
+    rejected: list[RejectedCandidate] = field(
+        default_factory=lambda: [RejectedCandidate("sinusoid", {}, {}, {}, "ΔBIC 2.1 < 10")]
+    )
+    before: Goodness | None = None
 
     def as_model_dict(self) -> dict:
         return {
@@ -107,12 +113,6 @@ class StandInLoop:
             "tau_max_abs_z_before": 4000.0,
             "tau_max_abs_z_after": 80.0,
         }
-
-    def as_effects(self) -> list[dict]:
-        return self.effects
-
-    def as_candidates(self) -> list[dict]:
-        return [{"kind": "sinusoid", "reason": "ΔBIC 2.1 < 10"}]
 
 
 def synthetic_result(with_loop: bool = True) -> AnalysisResult:
@@ -136,14 +136,14 @@ def synthetic_result(with_loop: bool = True) -> AnalysisResult:
         ax = axes["accel_x"]
         rng = np.random.default_rng(1)
         z_before = rng.normal(0, 1, ax.curve.tau_s.size) + np.linspace(0, 5, ax.curve.tau_s.size)
-        effect = {
-            "kind": "temperature",
-            "params": {"coefficient": 1.2e-4},
-            "intervals": {"coefficient": [1.1e-4, 1.3e-4]},
-            "error_before": 4.2,
-            "error_after": 1.03,
-            "evidence": {"coherence": 0.9},
-        }
+        effect = AcceptedEffect(
+            kind="temperature",
+            params={"coefficient": 1.2e-4},
+            intervals={"coefficient": [1.1e-4, 1.3e-4]},
+            evidence={"coherence": 0.9},
+            error_before=4.2,
+            error_after=1.03,
+        )
         axes["accel_x"] = dataclasses.replace(
             ax,
             loop=StandInLoop(
@@ -154,7 +154,8 @@ def synthetic_result(with_loop: bool = True) -> AnalysisResult:
                 model_adev_after=ax.curve.adev,
                 z_before=z_before,
                 z_after=rng.normal(0, 1, ax.curve.tau_s.size),
-                effects=[effect],
+                accepted=[effect],
+                before=Goodness(4.2, 168.0, 40, 0.0, z_before, 5.9, 4000.0, 3.1, 4),
             ),
         )
     inp = InputSummary(
@@ -165,6 +166,7 @@ def synthetic_result(with_loop: bool = True) -> AnalysisResult:
         duration_s=FRAMES / RATE_HZ,
         segments=[{"start_s": 0.0, "end_s": FRAMES / RATE_HZ, "frames": FRAMES}],
         warnings=["2 gaps; analysed the longest clean segment"],
+        source=SCHEMA_NAME,
     )
     return AnalysisResult(input=inp, axes=axes, device={"prod_id": "16364"})
 
@@ -268,9 +270,11 @@ def test_terminal_table_is_in_paper_units(written) -> None:
     table = format_table(result)
     rows = {tuple(line.split()[:4]): line for line in table.splitlines()}
     rows |= {tuple(line.split()[:5]): line for line in table.splitlines()}
-    # Random walk of accel_x: measured 0.29 [0.2842, 0.2958] mg/√s next to paper 0.29, datasheet 0.2
+    # Random walk of accel_x: measured 0.29 [0.2842, 0.2958] mg/√s next to paper 0.29 and the
+    # datasheet's 0.12 m/s/√h = 0.12 / 60 / 9.80665e-3 = 0.2039 mg/√s (the paper rounds it to 0.2)
     lines = [line for line in table.splitlines() if line.startswith("Random walk N       accel_x")]
-    assert "0.29 [0.2842, 0.2958]" in lines[0] and lines[0].split()[-3:] == ["0.29", "0.2", "mg/√s"]
+    assert "0.29 [0.2842, 0.2958]" in lines[0]
+    assert lines[0].split()[-3:] == ["0.29", "0.2039", "mg/√s"]
     # ... and again in the datasheet's unit: 0.29 mg/√s = 0.1706 m/s/√h, datasheet 0.12 m/s/√h
     assert lines[1].split()[-3:] == ["0.1706", "0.12", "m/s/√h"]
     assert "0.1706 [0.1672, 0.174]" in lines[1]
@@ -301,7 +305,9 @@ def test_kalibr_yaml_uses_worst_axis_and_upper_bound_for_missing_k(written) -> N
     bound = float(np.min(hi / np.sqrt(c.tau_s / 3)))
     assert bound > K_GYRO_X
     assert float(values["gyroscope_random_walk"]) == pytest.approx(bound, rel=1e-6)
-    assert f"gyro_y {bound:.3g} (upper bound from the Allan curve, not resolved)" in text
+    assert f"gyro_y: N {result.axes['gyro_y'].terms.random_walk.value:.6e}" in text
+    how = "not resolved: upper bound from the Allan curve"
+    assert f"K {bound:.6e} rad/s^2/sqrt(Hz) ({how})" in text
     assert float(values["update_rate"]) == RATE_HZ
     assert values["rostopic"] == "/imu/adis16364"
 

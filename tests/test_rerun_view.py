@@ -202,7 +202,8 @@ def test_summary_states_si_beside_the_paper_units() -> None:
     assert cells[2].startswith(f"{n.value:.4g} [")
     assert cells[3] == "rad/s/√Hz"
     assert cells[4].startswith(f"{from_si(n.value, '°/√s'):.4g} [")
-    assert cells[5:] == ["0.05", "0.03", "°/√s"]  # the paper's and the datasheet's values
+    # the paper's value, and the datasheet's 2 °/√h in the paper's unit
+    assert cells[5:] == ["0.05", "0.03333", "°/√s"]
     assert "## Closed loop (before → after)" in md and "`run.mcap`" in md
 
 

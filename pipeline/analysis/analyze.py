@@ -61,6 +61,7 @@ class AnalyzeOptions:
     figures: bool = True
     memory_budget_bytes: int = MEMORY_BUDGET_BYTES
     tmp_dir: Path | None = None
+    datasheet: Path | None = None  # TOML of the part's noise specs (imupipe.report.datasheet)
 
 
 class Outputs(Protocol):
@@ -95,13 +96,19 @@ def axis_result(
     loop: bool,
     excluded: np.ndarray | None = None,
 ) -> AxisResult:
-    """Stage 4 (+ loop) of one axis: outliers excised (:func:`excise_outliers`), mean, rms,
-    IEEE 952 terms and the closed loop (``temp_d``, ``supply_d``: the segment's temperature and
-    supply as :func:`imupipe.model.loop.aux_block_means`; ``excluded``: the samples masked by
-    the ``"mask"`` gap policy, left out of mean and rms too)."""
+    """Stage 4 (+ loop) of one axis: outliers excised (:func:`excise_outliers`), mean, rms, the
+    closed loop and the final model (the loop's, or the IEEE 952 fit without the loop)
+    (``temp_d``, ``supply_d``: the segment's temperature and supply as
+    :func:`imupipe.model.loop.aux_block_means`; ``excluded``: the samples masked by the
+    ``"mask"`` gap policy, left out of mean and rms too)."""
     sensor = sensor_of(name)
     usable = None if excluded is None else ~excluded
     y, curve, outliers = excise_outliers(y, tau0_s, curve, excluded)
+    looped = (
+        close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d, excluded), curve)
+        if loop
+        else None
+    )
     return AxisResult(
         name=name,
         sensor=sensor,
@@ -109,10 +116,8 @@ def axis_result(
         mean=float(y.mean(where=usable) if usable is not None else y.mean()),
         rms=float(y.std(where=usable) if usable is not None else y.std()),
         curve=curve,
-        terms=fit_noise_terms(curve, sensor),
-        loop=close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d, excluded), curve)
-        if loop
-        else None,
+        terms=fit_noise_terms(curve, sensor) if looped is None else looped.terms_after,
+        loop=looped,
         outliers=outliers,
     )
 

@@ -9,7 +9,7 @@ The orchestrator fills an :class:`AnalysisResult`; :mod:`imupipe.report.report`,
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, is_dataclass
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -29,7 +29,10 @@ class AxisResult:
     """Everything measured on one axis.
 
     ``mean`` is the bias (average of the data) and ``rms`` the standard deviation about the mean
-    (the paper's "output noise"), both in ``unit`` ("rad/s" or "m/s^2").
+    (the paper's "output noise"), both in ``unit`` ("rad/s" or "m/s^2").  ``terms`` is the
+    FINAL model: after the closed loop (``loop.terms_after``), or the IEEE 952 fit where the loop
+    did not run or accepted nothing; every report and export shows it.  :attr:`baseline` is the
+    fit before the loop.
     """
 
     name: str
@@ -42,6 +45,11 @@ class AxisResult:
     loop: LoopResult | None = None
     outliers: dict | None = None
     """Samples excised before the fit (:func:`imupipe.analysis.analyze.excise_outliers`)."""
+
+    @property
+    def baseline(self) -> NoiseTerms:
+        """The IEEE 952 fit before the closed loop (the final model when the loop did not run)."""
+        return self.terms if self.loop is None else self.loop.terms_before
 
 
 @dataclass(frozen=True)
@@ -110,8 +118,11 @@ ALLAN_SCHEMA = pl.Schema(
 
 
 def jsonable(obj: object) -> object:
-    """``obj`` with numpy scalars/arrays turned into Python values and non-finite floats into
-    ``None`` (JSON has no NaN), recursively through dicts, lists and tuples."""
+    """``obj`` with numpy scalars/arrays turned into Python values, non-finite floats into
+    ``None`` (JSON has no NaN) and dataclass instances (the loop's records) into dicts of their
+    fields, recursively through dicts, lists and tuples."""
+    if is_dataclass(obj) and not isinstance(obj, type):
+        return jsonable(asdict(obj))
     if isinstance(obj, dict):
         return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, np.ndarray):
@@ -141,6 +152,7 @@ def _axis_json(axis: AxisResult) -> dict:
             "n_terms": curve.n_terms,
             "alpha": curve.alpha,
             "confidence": curve.confidence,
+            "model_adev": axis.terms.adev(curve.tau_s),
         },
         "ieee952": axis.terms.as_dict(),
         "ieee952_fit": axis.terms.fit_summary(),
@@ -154,9 +166,13 @@ def _axis_json(axis: AxisResult) -> dict:
         out["allan"]["model_adev_after"] = loop.model_adev_after
         out["residual"] = {"z_before": loop.z_before, "z_after": loop.z_after}
         out["model"] = loop.as_model_dict()
-        out["effects"] = loop.as_effects()
-        out["candidates"] = loop.as_candidates()
-        out["ieee952_after"] = loop.terms_after.as_dict()
+        out["effects"] = loop.accepted
+        out["candidates"] = loop.rejected
+        out["before"] = {
+            "ieee952": loop.terms_before.as_dict(),
+            "ieee952_fit": loop.terms_before.fit_summary(),
+            "error": loop.before.error,
+        }
     return out
 
 

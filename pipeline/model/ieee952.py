@@ -36,6 +36,8 @@ sequential deletion test (:func:`fit_start`) accepts.
 from __future__ import annotations
 
 import functools
+import itertools
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Literal
 
@@ -43,6 +45,7 @@ import numba
 import numpy as np
 from scipy import optimize, special
 
+from imupipe.model.effects import gauss_markov_avar, sinusoid_avar
 from imupipe.vocab import TERM_NAMES, TERM_UNITS, chi2_ppf_1dof
 
 if TYPE_CHECKING:
@@ -407,6 +410,37 @@ def cutoff_grid(tau: np.ndarray) -> np.ndarray:
     return np.concatenate([np.geomspace(0.05 / tau[-1], 10.0 / tau[0], 25), [np.inf]])
 
 
+def avar_upper(avar: np.ndarray, edf: np.ndarray, level: float = 0.95) -> np.ndarray:
+    """Upper end of the two-sided ``level`` chi-square interval of AVAR estimates ``avar`` with
+    ``edf`` degrees of freedom: avar·ν/χ²_ν((1 − level)/2) (u²; NaN where ν is unknown).  The
+    bound every noise term's asymptote is held below (:func:`asymptote_caps`,
+    :func:`flicker_limit`): a 95 % bound, not the curve's 68.3 % error bars, since the lowest of
+    some 50 correlated points is compared."""
+    nu = np.asarray(edf, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return np.asarray(avar, dtype=float) * nu / special.chdtri(nu, 0.5 + level / 2)
+
+
+def flicker_limit(avar_hi: np.ndarray) -> float:
+    """Largest B² (u²) whose plateau (2 ln2/π) B² stays below the lowest upper confidence
+    bound ``avar_hi`` of the measured AVAR (non-finite bounds ignored)."""
+    hi = np.asarray(avar_hi, dtype=float)
+    hi = hi[np.isfinite(hi)]
+    return float(hi.min() / _PLATEAU) if hi.size else np.inf
+
+
+def asymptote_caps(tau: np.ndarray, avar_hi: np.ndarray, tau_min: float) -> np.ndarray:
+    """Per IEEE 952 term, the largest squared coefficient (Q², N², B², K², R²) whose own
+    asymptote (Annex C: 3Q²/τ², N²/τ, the plateau (2 ln2/π) B², K²τ/3, R²τ²/2) stays at or
+    below the measured AVAR's upper confidence bound ``avar_hi`` at every τ ≥ ``tau_min`` (s):
+    a noise term cannot exceed the measured deviation anywhere in the model's range."""
+    tau, hi = np.asarray(tau, dtype=float), np.asarray(avar_hi, dtype=float)
+    keep = (tau >= tau_min * (1 - 1e-9)) & np.isfinite(hi)
+    if not keep.any():
+        return np.full(len(TERM_NAMES), np.inf)
+    return np.min(hi[keep, None] / design_columns(tau[keep]), axis=0)
+
+
 def fit_composite(
     tau: np.ndarray,
     avar: np.ndarray,
@@ -416,13 +450,18 @@ def fit_composite(
     n_nonlinear: int = 0,
     tau_min: float = 0.0,
     prefilter: bool = False,
+    flicker_max: float = np.inf,
 ) -> CompositeFit:
     """Fit the IEEE 952 model (+ ``extra`` AVAR columns) on octave-spaced τ ≥ ``tau_min`` (s).
 
     The flicker cut-off f0 is profiled over :func:`cutoff_grid` unless given; with
     ``prefilter`` also the sign of the 3/τ² column over ±1 (quantisation or the prefilter's
     correlation, module doc).  ``n_nonlinear`` counts nonlinear parameters of the extra
-    columns (for the degrees of freedom).
+    columns (for the degrees of freedom).  ``flicker_max`` (u²) bounds B² over that profile:
+    with a low cut-off the flicker column is small on the grid and B may grow without bound
+    while contributing little; a B whose plateau 0.664 B lies above the measured curve
+    (:func:`flicker_limit`) is physically impossible, so such (f0, sign) fits are passed over
+    while a possible one exists.
     """
     extra = extra or {}
     tau = np.ascontiguousarray(tau, dtype=float)
@@ -438,8 +477,11 @@ def fit_composite(
     designs[:, :, 2] = np.tile(flicker[idx].T, (len(signs), 1))
     a = np.ascontiguousarray(avar[idx], dtype=float)
     coefs, devs = _fit_designs(designs, a, np.ascontiguousarray(edf[idx], dtype=float))
+    possible = coefs[:, 2] <= flicker_max
     best: CompositeFit | None = None
     for k, (coef, dev) in enumerate(zip(coefs, devs.tolist(), strict=True)):
+        if possible.any() and not possible[k]:
+            continue
         if best is None or dev < best.deviance - 1e-9:
             sign, f0 = signs[k // len(grid)], grid[k % len(grid)]
             design = base.copy()
@@ -459,17 +501,22 @@ def fit_start(
     extra: dict[str, np.ndarray] | None = None,
     level: float = 0.999,
     prefilter: bool = True,
+    flicker_max: float = np.inf,
 ) -> tuple[float, str]:
-    """Smallest τ (s) from which the composite model holds, and why (sequential deletion test).
+    """Smallest τ (s) from which the composite model holds, and why (deletion tests).
 
-    The model is exact for prefiltered white noise only from m = L − 1 (module doc), L unknown.
-    Starting at the first octave point, drop it while its deviance contribution
-    ΔD = D(with it) − D(without it) exceeds φ·χ²₁(``level``) (φ: dispersion of the fit without
-    it; ΔD ~ φ χ²₁ under the model, the quasi-likelihood deletion test of McCullagh & Nelder,
-    §9.2), keeping at least 3 residual degrees of freedom.  ``prefilter`` as in
-    :func:`fit_composite`.  Returns (tau_min, note).
+    The model is exact for prefiltered white noise only from m = L − 1 (module doc), L unknown,
+    and a sensor resonance can bend the curve over several short octaves.  Fits start at each of
+    the first third of the octave points (keeping ≥ 3 residual degrees of freedom); point s
+    contributes ΔD_s = D(from s) − D(from s + 1).  The fit starts just after the LAST point whose
+    ΔD_s exceeds φ·χ²₁(``level``), φ the dispersion of the fit from the latest start (so a
+    resonance at short τ does not inflate the yardstick, and a misfit at long τ that the loop
+    treats inflates it for every point alike; ΔD ~ φ χ²₁ under the model, the quasi-likelihood
+    deletion test of McCullagh & Nelder, §9.2).  Whatever lies below that start is left out;
+    the fitted range is the one where the model holds point by point.  ``prefilter`` and
+    ``flicker_max`` as in :func:`fit_composite`.  Returns (tau_min, note).
     """
-    fit, note = _start_fit(tau, avar, edf, extra, level, prefilter)
+    fit, note = _start_fit(tau, avar, edf, extra, level, prefilter, flicker_max)
     return float(tau[fit.fit_index[0]]), note
 
 
@@ -480,26 +527,36 @@ def _start_fit(
     extra: dict[str, np.ndarray] | None,
     level: float,
     prefilter: bool,
+    flicker_max: float = np.inf,
 ) -> tuple[CompositeFit, str]:
     """:func:`fit_start`, returning the fit from the chosen τ (= ``fit_composite`` with that
     ``tau_min``) instead of only its first τ."""
     limit = chi2_ppf_1dof(level)
     idx = octave_index(tau)
-    fit = fit_composite(tau, avar, edf, extra, prefilter=prefilter)
-    for s in range(len(idx) - 1):
-        rest = fit_composite(tau, avar, edf, extra, tau_min=tau[idx[s + 1]], prefilter=prefilter)
-        delta = fit.deviance - rest.deviance
-        if rest.dof < 3 or delta <= rest.dispersion * limit:
+    fits = [fit_composite(tau, avar, edf, extra, prefilter=prefilter, flicker_max=flicker_max)]
+    for s in range(1, max(len(idx) // 3, 1) + 1):
+        rest = fit_composite(
+            tau, avar, edf, extra, tau_min=tau[idx[s]], prefilter=prefilter, flicker_max=flicker_max
+        )
+        if rest.dof < 3:
             break
-        fit = rest
-    tau_min = float(tau[fit.fit_index[0]])
-    if fit.fit_index[0] == idx[0]:
+        fits.append(rest)
+    reference = fits[-1].dispersion
+    delta = np.array([a.deviance - b.deviance for a, b in itertools.pairwise(fits)])
+    significant = np.flatnonzero(delta > reference * limit)
+    start = int(significant[-1]) + 1 if significant.size else 0
+    fit = fits[start]
+    if start == 0:
         return fit, "fit from the first tau: the shortest tau agrees with the model"
-    dropped = ", ".join(f"{t:.3g}" for t in tau[idx[: np.searchsorted(idx, fit.fit_index[0])]])
+    tau_min = float(tau[fit.fit_index[0]])
+    dropped = ", ".join(f"{t:.3g}" for t in tau[idx[:start]])
+    worst = ", ".join(f"{tau[idx[j]]:.3g} s" for j in significant)
     return fit, (
-        f"fit from tau = {tau_min:.3g} s: tau = {dropped} s rejected by the deletion test "
-        f"(deviance above phi*chi2_1({level})), i.e. samples correlated over more lags than the "
-        "white + prefilter model holds for (sensor filter, aliasing or a short-period effect)"
+        f"fit from tau = {tau_min:.3g} s: below it the model does not hold (tau = {dropped} s "
+        f"left out; deviance contribution above phi*chi2_1({level}) at {worst}, phi = "
+        f"{reference:.3g} from the fit from tau = {tau[idx[len(fits) - 1]]:.3g} s), i.e. samples "
+        "correlated over more lags than the white + prefilter model holds for (sensor filter, "
+        "aliasing or a short-period resonance)"
     )
 
 
@@ -519,6 +576,36 @@ class NoiseTerm:
     reason: str | None
 
 
+_EFFECT_SHAPES: dict[str, Callable[[np.ndarray, float], np.ndarray]] = {
+    "sinusoid": sinusoid_avar,
+    "gauss_markov": gauss_markov_avar,
+}
+
+
+@dataclass(frozen=True)
+class EffectTerm:
+    """An AVAR effect the closed loop added to the model: a sinusoid (``parameter`` its
+    frequency, Hz; ``value`` its amplitude) or a Gauss–Markov process (``parameter`` its
+    correlation time Tc, s; ``value`` its σ), with the 95 % profile interval, in ``unit``."""
+
+    kind: str
+    value: float
+    lo: float
+    hi: float
+    unit: str
+    parameter: float
+
+    def avar(self, tau: np.ndarray) -> np.ndarray:
+        """Its Allan variance (u²) at ``tau`` (s) (:mod:`imupipe.model.effects` shapes)."""
+        return self.value**2 * _EFFECT_SHAPES[self.kind](
+            np.asarray(tau, dtype=float), self.parameter
+        )
+
+    def as_model_term(self) -> dict:
+        """The report.json ``model.terms`` entry: value, lo, hi, unit."""
+        return {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit}
+
+
 @dataclass(frozen=True)
 class NoiseTerms:
     """The five IEEE 952 terms of one axis (see module doc for units) and how they were fitted."""
@@ -534,18 +621,26 @@ class NoiseTerms:
     deviance_per_dof: float = np.nan  # D/dof of the fit (≈ 1 when the model is adequate)
     prefilter_avar_s2: float = 0.0  # C of the −C/τ² prefilter term (u²·s², module doc)
     fit_note: str = ""  # where the fit starts and why; adequacy of the model
+    effects: tuple[EffectTerm, ...] = ()  # AVAR effects of the final model (closed loop)
 
     def as_dict(self) -> dict:
         """The report.json ``ieee952`` block: {term: {value, lo, hi, unit, reason}}."""
         return {name: asdict(getattr(self, name)) for name in TERM_NAMES}
 
     def avar(self, tau: np.ndarray) -> np.ndarray:
-        """The fitted composite Allan variance at ``tau`` (s): the resolved terms of
-        :func:`avar_model` minus the prefilter term C/τ² (u²)."""
+        """The model's Allan variance at ``tau`` (s), exactly the reported terms: the resolved
+        terms of :func:`avar_model` (an unresolved term contributes nothing), the effects,
+        minus the prefilter term C/τ² (u²); NaN where that is not positive (below the fitted
+        range, where the model does not apply)."""
         values = {n: getattr(self, n).value or 0.0 for n in TERM_NAMES}
         tau = np.asarray(tau, dtype=float)
         model = avar_model(tau, **values, cutoff_hz=self.cutoff_hz)
-        return model - self.prefilter_avar_s2 / tau**2
+        model = model - self.prefilter_avar_s2 / tau**2 + sum(e.avar(tau) for e in self.effects)
+        return np.where(model > 0, model, np.nan)
+
+    def adev(self, tau: np.ndarray) -> np.ndarray:
+        """√ :meth:`avar`: the model's Allan deviation (u) at ``tau`` (s)."""
+        return np.sqrt(self.avar(tau))
 
     def fit_summary(self) -> dict:
         """How the terms were fitted: τ range (s), D/dof, prefilter term C (u²·s²), note."""
@@ -576,18 +671,31 @@ def terms_from_fit(
     edf: np.ndarray,
     sensor: Literal["gyro", "accel"],
     note: str = "",
+    avar_hi: np.ndarray | None = None,
+    effect_parameters: dict[str, float] | None = None,
 ) -> NoiseTerms:
     """Convert the squared coefficients of ``fit`` to IEEE 952 terms with profile intervals.
 
     A resolved term carries a ``reason`` only when the model is rejected on the fitted range
     (its interval is then inflated by the dispersion, and says so).  ``note`` (e.g. from
-    :func:`fit_start`) is prepended to ``fit_note``.
+    :func:`fit_start`) is prepended to ``fit_note``.  ``avar_hi``: the measured AVAR's upper
+    confidence bound at every τ; an upper bound (of an unresolved term, or of an interval) is
+    then never one whose asymptote lies above it (:func:`asymptote_caps`).  Extra columns of
+    ``fit`` become :class:`EffectTerm` s with the shape parameter ``effect_parameters[name]``.
     """
     tau_lo, tau_hi = fit.tau_range
     misfit = _adequacy(fit)
+    tau = 1.0 / fit.design[:, 1]
+    caps = (
+        np.full(len(TERM_NAMES), np.inf)
+        if avar_hi is None
+        else asymptote_caps(tau, avar_hi, tau_lo)
+    )
     terms, prefilter = {}, 0.0
     for j, (name, unit) in enumerate(zip(TERM_NAMES, TERM_UNITS[sensor], strict=True)):
-        lo, hi = fit.profile_interval(avar, edf, j)
+        lo, hi_profile = fit.profile_interval(avar, edf, j)
+        capped = caps[j] < hi_profile
+        hi = min(hi_profile, caps[j])  # an unresolved term: at most what the curve allows
         if j == 0 and fit.short_sign < 0:
             prefilter = float(3.0 * fit.coef[0])
             reason = (
@@ -597,16 +705,32 @@ def terms_from_fit(
             )
             terms[name] = NoiseTerm(None, None, None, unit, reason)
         elif lo > 0:
+            # a resolved term's interval: the profile's; B's is also held to a possible plateau
+            # (others may lie above the curve where the negative prefilter term offsets them)
             value = float(np.sqrt(fit.coef[j]))
-            terms[name] = NoiseTerm(value, float(np.sqrt(lo)), float(np.sqrt(hi)), unit, misfit)
+            if j == 2:
+                hi_profile = max(hi, float(fit.coef[j]))
+            hi = float(np.sqrt(hi_profile))
+            terms[name] = NoiseTerm(value, float(np.sqrt(lo)), hi, unit, misfit)
         else:
+            how = (
+                "its asymptote reaches the measured deviation's upper confidence bound"
+                if capped
+                else "profile likelihood"
+            )
             reason = (
                 f"not resolved for {tau_lo:.4g} s <= tau <= {tau_hi:.4g} s: 95 % upper bound "
-                f"{np.sqrt(hi):.3g} {unit}"
+                f"{np.sqrt(hi):.3g} {unit} ({how})"
             )
             if misfit:
                 reason += f"; {misfit}"
             terms[name] = NoiseTerm(None, None, float(np.sqrt(hi)), unit, reason)
+    effects = []
+    for name, parameter in (effect_parameters or {}).items():
+        j = fit.names.index(name)
+        lo, hi = fit.profile_interval(avar, edf, j)
+        value, lo, hi = (float(np.sqrt(c)) for c in (fit.coef[j], lo, hi))
+        effects.append(EffectTerm(name, value, lo, hi, TERM_UNITS[sensor][2], parameter))
     fit_note = "; ".join(t for t in (note, misfit or "model adequate on the fitted range") if t)
     return NoiseTerms(
         **terms,
@@ -616,6 +740,7 @@ def terms_from_fit(
         deviance_per_dof=fit.deviance / fit.dof,
         prefilter_avar_s2=prefilter,
         fit_note=fit_note,
+        effects=tuple(effects),
     )
 
 
@@ -634,10 +759,13 @@ def fit_noise_terms(curve: AllanCurve, sensor: Literal["gyro", "accel"]) -> Nois
     """IEEE 952 terms of one axis from its Allan curve (SI rate units, see module doc).
 
     Weights from :func:`monotone_edf`; the fit starts at the τ chosen by :func:`fit_start`
-    (reported in ``fit_tau_min_s`` and ``fit_note``).
+    (reported in ``fit_tau_min_s`` and ``fit_note``); B is kept possible
+    (:func:`flicker_limit`) and every upper bound below the measured curve's 95 % upper bound
+    (:func:`asymptote_caps`).
     """
     avar = np.asarray(curve.adev, dtype=float) ** 2
     tau = np.asarray(curve.tau_s, dtype=float)
     edf = monotone_edf(curve.edf)
-    fit, note = _start_fit(tau, avar, edf, None, 0.999, True)
-    return terms_from_fit(fit, avar, edf, sensor, note)
+    avar_hi = avar_upper(avar, edf)
+    fit, note = _start_fit(tau, avar, edf, None, 0.999, True, flicker_limit(avar_hi))
+    return terms_from_fit(fit, avar, edf, sensor, note, avar_hi)

@@ -24,6 +24,12 @@ Every fit uses the policy of :func:`ieee952.fit_noise_terms` (weights from
 1/τ² column), and the fitted τ range is fixed for the whole loop: every error before/after is a
 deviance over the same τ points, and the loop's terms before equal the reported IEEE 952 terms.
 
+The loop's records are frozen dataclasses (:class:`Trial`, :class:`Decision`,
+:class:`AcceptedEffect`, :class:`RejectedCandidate`), serialised for report.json by
+:func:`imupipe.analysis.results.jsonable`.  ``terms_after`` is the FINAL model every report shows:
+the IEEE 952 terms of the last fit (bounds held under the curve, B possible) and the accepted AVAR
+effects (:class:`ieee952.EffectTerm`); its model curve is exactly those terms.
+
 Everything after the baseline works on the τ grid and on ~1 s block means, so a 12 h / 100 Hz
 axis costs a fraction of a second; only spikes (full-rate) and the AVAR-term hold-out (half
 curves) touch the full series, and only when those candidates are already significant.
@@ -31,6 +37,7 @@ curves) touch the full series, and only when those candidates are already signif
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Literal
@@ -93,6 +100,32 @@ class Goodness:
     n_flags: int  # points with |z| > 3
 
 
+@dataclass(frozen=True)
+class AcceptedEffect:
+    """An effect the loop added to the model (report.json ``effects``): SI ``params`` with their
+    95 % ``intervals``, the ``evidence`` of the acceptance tests and the error (deviance per
+    dof) before and after adding it."""
+
+    kind: str
+    params: dict
+    intervals: dict
+    evidence: dict
+    error_before: float
+    error_after: float
+
+
+@dataclass(frozen=True)
+class RejectedCandidate:
+    """A candidate the loop tried and did not add (report.json ``candidates``), with the
+    ``reason`` (``None`` when it passed but another candidate was added in its round)."""
+
+    kind: str
+    params: dict
+    intervals: dict
+    evidence: dict
+    reason: str | None
+
+
 @dataclass
 class LoopResult:
     """Before/after of the loop for one axis (arrays on ``tau_s``)."""
@@ -107,9 +140,8 @@ class LoopResult:
     model_adev_after: np.ndarray
     before: Goodness
     after: Goodness
-    accepted: list[dict] = field(default_factory=list)
-    rejected: list[dict] = field(default_factory=list)
-    extra_terms: dict[str, dict] = field(default_factory=dict)
+    accepted: list[AcceptedEffect] = field(default_factory=list)
+    rejected: list[RejectedCandidate] = field(default_factory=list)
 
     @property
     def z_before(self) -> np.ndarray:
@@ -120,13 +152,14 @@ class LoopResult:
         return self.after.z
 
     def as_model_dict(self) -> dict:
-        """report.json ``model`` block (issue 4 contract)."""
+        """report.json ``model`` block (issue 4 contract): the final model's terms (IEEE 952 and
+        the accepted AVAR effects) and the goodness of fit before and after."""
         terms = {
             name: {k: v for k, v in t.items() if k != "reason"}
             for name, t in self.terms_after.as_dict().items()
         }
         return {
-            "terms": terms | self.extra_terms,
+            "terms": terms | {e.kind: e.as_model_term() for e in self.terms_after.effects},
             "error_before": self.before.error,
             "error_after": self.after.error,
             "dof": self.after.dof,
@@ -141,14 +174,6 @@ class LoopResult:
             "tau_max_abs_z_after": self.after.tau_max_abs_z,
         }
 
-    def as_effects(self) -> list[dict]:
-        """Accepted effects (issue 4 ``effects``)."""
-        return self.accepted
-
-    def as_candidates(self) -> list[dict]:
-        """Rejected candidates with the reason."""
-        return self.rejected
-
 
 @dataclass
 class _State:
@@ -161,9 +186,30 @@ class _State:
     n_nonlinear: int = 0
     column_params: dict[str, float] = field(default_factory=dict)  # Tc or f0 of each column
     avar_d: np.ndarray | None = None  # AVAR of y_d at the decimated factors (cache)
+    effect_parameters: dict[str, float] = field(default_factory=dict)  # shape of each column
 
-    def fit(self, ax: _Axis) -> ieee952.CompositeFit:
-        return _fit(ax.tau, self.avar, ax.edf, ax.tau_min, self.columns, None, self.n_nonlinear)
+    def fit(self, ax: _Axis, possible_b: bool = False) -> ieee952.CompositeFit:
+        """The composite fit of this state; ``possible_b``: with B held to a plateau under
+        the curve (:func:`ieee952.flicker_limit`) — the reported model.  The loop's decisions
+        use the free fit (the constraint would move part of an unmodelled effect's hump from
+        B into the candidate being judged)."""
+        limit = ieee952.flicker_limit(ax.avar_hi(self.avar)) if possible_b else np.inf
+        return _fit(
+            ax.tau, self.avar, ax.edf, ax.tau_min, self.columns, None, self.n_nonlinear, limit
+        )
+
+    def terms(self, ax: _Axis) -> ieee952.NoiseTerms:
+        """The model of this state as reported: the IEEE 952 terms of its fit with B possible
+        (bounds capped by this state's curve) and the accepted AVAR effects."""
+        return ieee952.terms_from_fit(
+            self.fit(ax, possible_b=True),
+            self.avar,
+            ax.edf,
+            ax.sig.sensor,
+            ax.fit_note,
+            ax.avar_hi(self.avar),
+            {k: self.effect_parameters[k] for k in self.columns},
+        )
 
 
 def _fit(
@@ -174,12 +220,22 @@ def _fit(
     columns: dict[str, np.ndarray] | None = None,
     cutoff_hz: float | None = None,
     n_nonlinear: int = 0,
+    flicker_max: float = np.inf,
 ) -> ieee952.CompositeFit:
     """Every fit of the loop follows :func:`ieee952.fit_noise_terms`: octave τ ≥ ``tau_min``
     (from :func:`ieee952.fit_start` on the baseline, fixed for the whole loop so that all
-    before/after deviances cover the same points) and the signed prefilter 1/τ² column."""
+    before/after deviances cover the same points), the signed prefilter 1/τ² column and, for
+    the fits of the whole curve, a possible B (``flicker_max``)."""
     return ieee952.fit_composite(
-        tau, avar, edf, columns, cutoff_hz, n_nonlinear, tau_min=tau_min, prefilter=True
+        tau,
+        avar,
+        edf,
+        columns,
+        cutoff_hz,
+        n_nonlinear,
+        tau_min=tau_min,
+        prefilter=True,
+        flicker_max=flicker_max,
     )
 
 
@@ -229,7 +285,13 @@ class _Axis:
         self.tau = np.asarray(curve.tau_s, dtype=float)
         self.edf = ieee952.monotone_edf(curve.edf)
         self.avar = np.asarray(curve.adev, dtype=float) ** 2
-        self.tau_min, self.fit_note = ieee952.fit_start(self.tau, self.avar, self.edf)
+        self.hi_ratio = ieee952.avar_upper(1.0, self.edf)
+        self.tau_min, self.fit_note = ieee952.fit_start(  # as fit_noise_terms: B possible
+            self.tau,
+            self.avar,
+            self.edf,
+            flicker_max=ieee952.flicker_limit(self.avar_hi(self.avar)),
+        )
         self.block = block_size(len(sig.y), sig.tau0)
         self.dt = self.block * sig.tau0
         self.y_d = effects.block_means(sig.y, self.block)
@@ -238,6 +300,13 @@ class _Axis:
         valid = m_d <= (len(self.y_d) - 1) // 2
         self.dec_index = np.flatnonzero(dec)[valid]
         self.m_d = m_d[valid]
+
+    def avar_hi(self, avar: np.ndarray) -> np.ndarray:
+        """95 % upper confidence bound (:func:`ieee952.avar_upper`) that a model of a
+        (corrected) AVAR curve must respect: the lower of the measured curve's and the corrected
+        curve's (the edf does not change with a correction), so a bound is consistent with both
+        curves the report draws."""
+        return np.minimum(avar, self.avar) * self.hi_ratio
 
     def corrected_avar(self, state: _State, cand: effects.Candidate) -> np.ndarray:
         """AVAR after a correction: full-rate recompute for spikes, else the decimated change
@@ -344,43 +413,25 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
     state = _State(ax.avar, ax.y_d.copy(), None)
     fit0 = state.fit(ax)
     good0 = goodness(fit0, tau, state.avar, edf)
-    terms0 = ieee952.terms_from_fit(fit0, state.avar, edf, signals.sensor, ax.fit_note)
-    result_accepted: list[dict] = []
-    rejected: dict[str, dict] = {}
-    extra_terms: dict[str, dict] = {}
+    terms0 = state.terms(ax)
+    accepted: list[AcceptedEffect] = []
+    rejected: dict[str, RejectedCandidate] = {}
     fit, good = fit0, good0
     for _ in range(MAX_ROUNDS):
-        trials = _evaluate(ax, state, fit, good)
-        trials.sort(key=lambda t: -t["margin"])
-        chosen = None
-        for t in trials:
-            if t["accept"] and chosen is None:
-                chosen = t
-            else:
-                rejected[t["kind"]] = t["report"] | {"reason": t["reason"]}
+        decisions = sorted(_evaluate(ax, state, fit, good), key=lambda d: -d.trial.margin)
+        chosen = next((d for d in decisions if d.accept), None)
+        for d in decisions:
+            if d is not chosen:
+                rejected[d.trial.kind] = d.rejected()
         if chosen is None:
             break
-        rejected.pop(chosen["kind"], None)
-        state = chosen["state"]
+        rejected.pop(chosen.trial.kind, None)
+        state = chosen.trial.state
         new_fit = state.fit(ax)
         new_good = goodness(new_fit, tau, state.avar, edf)
-        entry = chosen["report"] | {"error_before": good.error, "error_after": new_good.error}
-        result_accepted.append(entry)
-        if chosen["column_name"]:
-            j = new_fit.names.index(chosen["column_name"])
-            lo, hi = new_fit.profile_interval(state.avar, edf, j)
-            extra_terms[chosen["column_name"]] = {
-                "value": float(np.sqrt(new_fit.coef[j])),
-                "lo": float(np.sqrt(lo)),
-                "hi": float(np.sqrt(hi)),
-                "unit": "rad/s" if signals.sensor == "gyro" else "m/s^2",
-            }
+        accepted.append(chosen.accepted(good.error, new_good.error))
         fit, good = new_fit, new_good
-    terms1 = (
-        terms0
-        if fit is fit0
-        else ieee952.terms_from_fit(fit, state.avar, edf, signals.sensor, ax.fit_note)
-    )
+    terms1 = terms0 if fit is fit0 else state.terms(ax)
     return LoopResult(
         name=signals.name,
         tau_s=tau,
@@ -388,13 +439,12 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         adev_after=np.sqrt(state.avar),
         terms_before=terms0,
         terms_after=terms1,
-        model_adev_before=np.sqrt(fit0.avar()),
-        model_adev_after=np.sqrt(fit.avar()),
+        model_adev_before=terms0.adev(tau),
+        model_adev_after=terms1.adev(tau),
         before=good0,
         after=good,
-        accepted=result_accepted,
+        accepted=accepted,
         rejected=list(rejected.values()),
-        extra_terms=extra_terms,
     )
 
 
@@ -448,7 +498,7 @@ def noise_psd(fit: ieee952.CompositeFit, column_params: dict[str, float]) -> eff
     )
 
 
-def _evaluate(ax: _Axis, state: _State, fit, good) -> list[dict]:
+def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     """Evaluate every candidate against the current state (significance, hold-out, flags).
 
     Time-domain candidates are estimated by spectral GLS whitened with the current model's
@@ -494,7 +544,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[dict]:
             cand.p_value = min(1.0, cand.p_value * n_tests)
             cand.evidence |= {"p_value_family": cand.p_value, "n_time_domain_tests": n_tests}
         margin = 2 * np.log(ALPHA / cand.p_value)
-        trials.append(_trial(cand, margin, flags_ok, new_state, None, lambda h=hold: h))
+        trials.append(Trial(cand.kind, cand, float(margin), flags_ok, new_state, lambda h=hold: h))
     for kind, grid in _grids(tau, ax.tau_min).items():
         if kind in state.columns:
             continue
@@ -511,6 +561,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[dict]:
         )
         p, fit_new = _best(fits)
         cand = _column_candidate(kind, p, fit_new, state, ax)
+        shape = cand.params["frequency_hz" if kind == "sinusoid" else "tau_c_s"]
         new_state = _State(
             state.avar,
             state.y_d,
@@ -518,6 +569,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[dict]:
             state.columns | {kind: cand.column},
             state.n_nonlinear + 1,
             state.column_params | {kind: p},
+            effect_parameters=state.effect_parameters | {kind: shape},
         )
         fit_named = new_state.fit(ax)
         dbic, flags_ok = _judge(kind, fit_named, fit, good, 2, tau, state.avar, edf)
@@ -525,7 +577,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[dict]:
         if kind == "gauss_markov" and dbic >= DELTA_BIC:  # costly: significant ones only
             cand.intervals = _gauss_markov_profile(fits, state.avar, edf)
         holdout = partial(_holdout_column, ax, state, cand)
-        trials.append(_trial(cand, dbic - DELTA_BIC, flags_ok, new_state, kind, holdout))
+        trials.append(Trial(kind, cand, float(dbic - DELTA_BIC), flags_ok, new_state, holdout))
     return [_decide(t) for t in trials]
 
 
@@ -538,28 +590,60 @@ def _corrected_state(ax: _Axis, state: _State, cand: effects.Candidate) -> _Stat
         state.columns,
         state.n_nonlinear,
         state.column_params,
+        effect_parameters=state.effect_parameters,
     )
 
 
-def _trial(cand, margin, flags_ok, new_state, column_name, holdout) -> dict:
-    """``margin``: evidence beyond the acceptance threshold, in deviance units (> 0: significant):
-    ΔBIC − 10 for AVAR terms, 2 ln(α / p) for time-domain corrections."""
-    return {
-        "kind": cand.kind,
-        "cand": cand,
-        "margin": float(margin),
-        "flags_ok": flags_ok,
-        "state": new_state,
-        "column_name": column_name,
-        "holdout": holdout,
-    }
+@dataclass(frozen=True)
+class Trial:
+    """A candidate evaluated against the current model.
+
+    ``margin``: evidence beyond the acceptance threshold, in deviance units (> 0: significant):
+    ΔBIC − 10 for AVAR terms, 2 ln(α / p) for time-domain corrections.  ``state``: the loop's
+    state with the candidate added; ``holdout``: the (costly) out-of-sample check, run only for
+    significant candidates."""
+
+    kind: str
+    cand: effects.Candidate
+    margin: float
+    flags_ok: bool
+    state: _State
+    holdout: Callable[[], dict]
 
 
-def _decide(t: dict) -> dict:
+@dataclass(frozen=True)
+class Decision:
+    """A :class:`Trial` judged by the acceptance rules: ``accept``, the ``reason`` when not,
+    and the hold-out result (``{"holds": None}`` when it was not run)."""
+
+    trial: Trial
+    accept: bool
+    reason: str | None
+    holdout: dict
+
+    def _record(self) -> dict:
+        cand = self.trial.cand
+        return {
+            "kind": cand.kind,
+            "params": cand.params,
+            "intervals": cand.intervals,
+            "evidence": cand.evidence | {"holdout": self.holdout},
+        }
+
+    def accepted(self, error_before: float, error_after: float) -> AcceptedEffect:
+        """The record of an accepted effect, with the error before and after adding it."""
+        return AcceptedEffect(**self._record(), error_before=error_before, error_after=error_after)
+
+    def rejected(self) -> RejectedCandidate:
+        """The record of a candidate not added."""
+        return RejectedCandidate(**self._record(), reason=self.reason)
+
+
+def _decide(t: Trial) -> Decision:
     """Apply the acceptance rules; the (costly) hold-out only runs for significant candidates."""
-    cand = t["cand"]
-    significant = t["margin"] >= 0
-    hold = t["holdout"]() if significant else {"holds": None}
+    cand = t.cand
+    significant = t.margin >= 0
+    hold = t.holdout() if significant else {"holds": None}
     reasons = []
     if not significant:
         reasons.append(
@@ -572,17 +656,9 @@ def _decide(t: dict) -> dict:
     line_p = cand.evidence.get("line_p_value")
     if line_p is not None and line_p >= ALPHA:
         reasons.append(f"no periodogram line above the band's noise (p {line_p:.3g} >= {ALPHA:g})")
-    if not t["flags_ok"]:
+    if not t.flags_ok:
         reasons.append("flags do not clear")
-    t["accept"] = not reasons
-    t["reason"] = "; ".join(reasons) or None
-    t["report"] = {
-        "kind": cand.kind,
-        "params": cand.params,
-        "intervals": cand.intervals,
-        "evidence": cand.evidence | {"holdout": hold},
-    }
-    return t
+    return Decision(t, not reasons, "; ".join(reasons) or None, hold)
 
 
 def _column_candidate(kind, p, fit_new, state, ax) -> effects.Candidate:

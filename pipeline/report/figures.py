@@ -3,8 +3,9 @@
 - ``allan_<sensor>.png``: log-log overlapping Allan deviation of the three axes of one sensor with
   their confidence intervals as error bars and the fitted IEEE 952 asymptotes (each term's own
   contribution, IEEE Std 952-1997 Annex C: sqrt(3) Q / tau, N / sqrt(tau), the flicker form whose
-  plateau is 0.664 B, K sqrt(tau / 3), R tau / sqrt(2)), like figures 4 (accelerometers) and 5
-  (gyroscopes) of the ADIS16364 paper.
+  plateau is 0.664 B, K sqrt(tau / 3), R tau / sqrt(2)) of the final model, and that model's
+  deviation (exactly its reported terms, :meth:`imupipe.model.ieee952.NoiseTerms.adev`), like
+  figures 4 (accelerometers) and 5 (gyroscopes) of the ADIS16364 paper.
 - ``loop_<sensor>.png``: the closed loop of issue 4 — measured deviation (and, when an effect was
   regressed out in the time domain, the deviation after that correction), model before and after,
   and the normalised residual z before and after.
@@ -85,6 +86,8 @@ def allan_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None
             if value is not None:
                 ax.plot(tau, value * np.sqrt(columns[:, j]), ls=_STYLES[symbol], color=color)
                 used.add(symbol)
+        ax.plot(tau, axis.terms.adev(tau), "-", color=color, lw=1.2, alpha=0.7)
+    ax.plot([], [], "-", color="0.3", label="final model (reported terms)")
     for symbol, style in _STYLES.items():
         if symbol in used:
             ax.plot([], [], ls=style, color="0.3", label=f"fitted {symbol} asymptote")

@@ -18,6 +18,7 @@ from imupipe.progress import StageProgress
 from imupipe.report.report import write_report
 
 if TYPE_CHECKING:
+    from imupipe.report.datasheet import Datasheet
     from imupipe.report.rerun_view import RrdWriter
 
 
@@ -25,10 +26,17 @@ class ReportOutputs:
     """Writes the reports (and ``recording.rrd`` once :meth:`begin` was called) into
     ``out_dir``; implements :class:`imupipe.analysis.analyze.Outputs`."""
 
-    def __init__(self, out_dir: Path, figures: bool = True, rrd_full: bool = False) -> None:
+    def __init__(
+        self,
+        out_dir: Path,
+        figures: bool = True,
+        rrd_full: bool = False,
+        datasheet: Datasheet | None = None,
+    ) -> None:
         self.out_dir = Path(out_dir)
         self.figures = figures
         self.rrd_full = rrd_full
+        self.datasheet = datasheet
         self.rrd: RrdWriter | None = None
 
     def begin(self, signals: pl.DataFrame) -> None:
@@ -39,7 +47,7 @@ class ReportOutputs:
 
     def finish(self, result: AnalysisResult, progress: StageProgress) -> None:
         with progress.stage("report", 2 if self.rrd else 1, "files") as advance:
-            write_report(result, self.out_dir, figures=self.figures)
+            write_report(result, self.out_dir, figures=self.figures, datasheet=self.datasheet)
             advance(1)
             if self.rrd:
                 self.rrd.finish(result)

@@ -13,8 +13,6 @@ import math
 from collections.abc import Iterable
 from pathlib import Path
 
-import numpy as np
-
 from imupipe.analysis.results import (
     ERROR_MEASURE,
     AnalysisResult,
@@ -23,7 +21,11 @@ from imupipe.analysis.results import (
     jsonable,
     report_json,
 )
-from imupipe.report.paper import DATASHEET_RANDOM_WALK, DATASHEET_SOURCE, PAPER_SOURCE, PAPER_TABLE
+from imupipe.device.frame_schema import SCHEMA_NAME as ADIS16364_SOURCE
+from imupipe.report.datasheet import Datasheet, adis16364
+from imupipe.report.exports import render as render_export
+from imupipe.report.exports import write_exports
+from imupipe.report.paper import PAPER_SOURCE, PAPER_TABLE
 from imupipe.units import PAPER_UNIT, from_si
 from imupipe.vocab import TERM_NAMES
 
@@ -54,40 +56,52 @@ def _term_text(term: object, unit: str, interval: bool = True) -> str:
     return text
 
 
-def _term_cell(axis: AxisResult, name: str) -> tuple[str, str]:
-    """(measured value with interval, paper unit) of one IEEE 952 term or of mean/rms."""
-    unit = PAPER_UNIT[axis.sensor][name]
+def _measured(axis: AxisResult, name: str, unit: str) -> str:
+    """The final model's term ``name`` (or the axis' mean/rms) in ``unit``, with its interval."""
     if name in ("mean", "rms"):
-        return _fmt(from_si(getattr(axis, name), unit)), unit
-    return _term_text(getattr(axis.terms, name), unit), unit
+        return _fmt(from_si(getattr(axis, name), unit))
+    return _term_text(getattr(axis.terms, name), unit)
 
 
-def paper_rows(result: AnalysisResult) -> list[tuple[str, str, str, str, str, str]]:
-    """Rows (quantity, axis, measured [interval], paper measured, datasheet, unit) comparing our
-    values with the paper's table, in the paper's units (see :mod:`imupipe.report.paper`)."""
+def is_adis16364(result: AnalysisResult) -> bool:
+    """Whether the recording holds ADIS16364 frames (the paper's part)."""
+    return result.input.source == ADIS16364_SOURCE
+
+
+def default_datasheet(result: AnalysisResult) -> Datasheet | None:
+    """The datasheet shown when none is given: the ADIS16364's for its recordings, else none."""
+    return adis16364() if is_adis16364(result) else None
+
+
+def paper_rows(
+    result: AnalysisResult, datasheet: Datasheet | None = None
+) -> tuple[tuple[str, ...], list[tuple[str, ...]]]:
+    """(header, rows) of the headline table: quantity, axis, the final model's value with its
+    interval, the paper's measured value (ADIS16364 recordings only), the ``datasheet`` value
+    (when given), unit — in the paper's units (:mod:`imupipe.report.paper`).  A datasheet value
+    whose own unit differs from the paper's gets a second row in the datasheet's unit."""
+    paper = is_adis16364(result)
+    header = ("quantity", "axis", "measured [95 % interval]")
+    header += ("paper",) * paper + ("datasheet",) * (datasheet is not None) + ("unit",)
+
+    def row(label: str, axis: AxisResult, name: str, unit: str) -> tuple[str, ...]:
+        cells = (label, axis.name, _measured(axis, name, unit))
+        if paper:
+            ref = PAPER_TABLE.get(name, {}).get(axis.name)
+            cells += ("—" if ref is None else _fmt(from_si(ref.measured_si(), unit)),)
+        if datasheet is not None:
+            spec = datasheet.get(axis.sensor, name)
+            cells += ("—" if spec is None else _fmt(from_si(spec.si(), unit)),)
+        return (*cells, unit)
+
     rows = []
-    for name, label in _PAPER_QUANTITIES:
+    for name, label in _PAPER_QUANTITIES + _OTHER_TERMS:
+        rows += [row(label, a, name, PAPER_UNIT[a.sensor][name]) for a in result.axes.values()]
         for axis in result.axes.values():
-            cell, unit = _term_cell(axis, name)
-            ref = PAPER_TABLE[name].get(axis.name)
-            paper, sheet = (ref.measured_si(), ref.datasheet_si()) if ref else (None, None)
-            paper = "—" if paper is None else _fmt(from_si(paper, unit))
-            sheet = "—" if sheet is None else _fmt(from_si(sheet, unit))
-            rows.append((label, axis.name, cell, paper, sheet, unit))
-    for axis in result.axes.values():  # N once more, in the datasheet's own units
-        sheet = DATASHEET_RANDOM_WALK[axis.sensor]
-        ref = PAPER_TABLE["random_walk"].get(axis.name)
-        paper = "—" if ref is None else _fmt(from_si(ref.measured_si(), sheet.unit))
-        cell = _term_text(axis.terms.random_walk, sheet.unit)
-        rows.append(("Random walk N", axis.name, cell, paper, _fmt(sheet.datasheet), sheet.unit))
-    for name, label in _OTHER_TERMS:
-        for axis in result.axes.values():
-            cell, unit = _term_cell(axis, name)
-            rows.append((label, axis.name, cell, "—", "—", unit))
-    return rows
-
-
-_ROW_HEADER = ("quantity", "axis", "measured [95 % interval]", "paper", "datasheet", "unit")
+            spec = datasheet.get(axis.sensor, name) if datasheet else None
+            if spec is not None and spec.unit != PAPER_UNIT[axis.sensor][name]:
+                rows.append(row(label, axis, name, spec.unit))
+    return header, rows
 
 
 def _before_after(model: dict, key: str) -> str:
@@ -101,7 +115,7 @@ def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
         if axis.loop is None:
             continue
         model = jsonable(axis.loop.as_model_dict())
-        kinds = ", ".join(e["kind"] for e in axis.loop.as_effects()) or "none"
+        kinds = ", ".join(e.kind for e in axis.loop.accepted) or "none"
         tau_max = _before_after(model, "tau_max_abs_z")
         rows.append(
             (
@@ -135,14 +149,15 @@ def _md_table(header: tuple[str, ...], rows: Iterable[tuple[str, ...]]) -> str:
     return "\n".join([line(header), "|" + "---|" * len(header), *map(line, rows)])
 
 
-def format_table(result: AnalysisResult) -> str:
-    """The paper-style terminal table printed by ``imupipe analyze``."""
+def format_table(result: AnalysisResult, datasheet: Datasheet | None = None) -> str:
+    """The paper-style terminal table printed by ``imupipe analyze``: the final model's terms
+    (``datasheet``: default :func:`default_datasheet`)."""
     inp = result.input
     head = (
         f"{inp.path} [{inp.topic}]: {inp.frames} frames, {inp.rate_hz:.4g} Hz, "
-        f"{inp.duration_s / 3600:.3g} h analysed"
+        f"{inp.duration_s / 3600:.3g} h analysed; final model (after the closed loop)"
     )
-    parts = [head, _text_table(_ROW_HEADER, paper_rows(result))]
+    parts = [head, _text_table(*paper_rows(result, datasheet or default_datasheet(result)))]
     loop_rows = _loop_rows(result)
     if loop_rows:
         parts.append(f"closed loop (error = {ERROR_MEASURE}):")
@@ -151,67 +166,19 @@ def format_table(result: AnalysisResult) -> str:
     return "\n".join(parts)
 
 
-def _kalibr_coefficient(axes: list[AxisResult], name: str, shape) -> tuple[float, str]:
-    """Worst (largest) axis value of IEEE 952 term ``name`` in SI, and how it was obtained.
-
-    When an axis cannot resolve the term, its upper bound is used: the term's own ``hi`` (95 %
-    bound) when given, else the bound from the curve itself, ``min over tau of adev_hi(tau) /
-    shape(tau)`` (a noise term cannot exceed the measured deviation at any tau; IEEE 952 Annex C
-    shapes).  A bound makes the filter conservative, never optimistic.
-    """
-    values, notes = [], []
-    for axis in axes:
-        term = getattr(axis.terms, name)
-        if term.value is not None:
-            value, note = term.value, "fitted"
-        elif term.hi is not None:
-            value, note = term.hi, "upper bound of its interval, not resolved"
-        else:
-            curve = axis.curve
-            hi = np.where(np.isfinite(curve.adev_hi), curve.adev_hi, curve.adev)
-            value = float(np.min(hi / shape(np.asarray(curve.tau_s))))
-            note = "upper bound from the Allan curve, not resolved"
-        values.append(value)
-        notes.append(f"{axis.name} {value:.3g} ({note})")
-    worst = int(np.argmax(values))
-    return values[worst], f"worst axis {axes[worst].name}; " + ", ".join(notes)
-
-
 def kalibr_yaml(result: AnalysisResult) -> str:
-    """Kalibr ``imu.yaml`` (continuous-time noise model, Kalibr wiki "IMU Noise Model").
-
-    ``*_noise_density`` is the white-noise density N (rad/s/√Hz, m/s²/√Hz), ``*_random_walk`` the
-    rate random walk K (rad/s²/√Hz, m/s³/√Hz) — both continuous-time, as Kalibr expects.  We use
-    the worst axis of each sensor, so a filter tuned with it is conservative.
-    """
-    lines = [
-        "# Kalibr IMU noise model written by imupipe (continuous-time, SI units).",
-        f"# Source: {result.input.path}, {result.input.duration_s / 3600:.3g} h analysed.",
-    ]
-    labels = {"gyro": "gyroscope", "accel": "accelerometer"}
-    shapes = {
-        "random_walk": lambda tau: 1.0 / np.sqrt(tau),  # sigma_N = N / sqrt(tau)
-        "rate_random_walk": lambda tau: np.sqrt(tau / 3.0),  # sigma_K = K sqrt(tau / 3)
-    }
-    keys = {"random_walk": "noise_density", "rate_random_walk": "random_walk"}
-    for sensor in ("accel", "gyro"):
-        axes = result.by_sensor(sensor)
-        if not axes:
-            continue
-        for term in ("random_walk", "rate_random_walk"):
-            value, how = _kalibr_coefficient(axes, term, shapes[term])
-            unit = getattr(axes[0].terms, term).unit
-            lines.append(f"# {labels[sensor]}_{keys[term]} [{unit}]: {how}")
-            lines.append(f"{labels[sensor]}_{keys[term]}: {value:.6e}")
-    lines.append(f"update_rate: {result.input.rate_hz:.6g}  # Hz")
-    lines.append(f"rostopic: {result.input.topic}")
-    return "\n".join(lines) + "\n"
+    """Kalibr ``imu.yaml`` of the final model (:func:`imupipe.report.exports.kalibr`)."""
+    return render_export(report_json(result), "kalibr")[1]
 
 
-def report_markdown(result: AnalysisResult, figures: dict[str, Path]) -> str:
-    """``report.md``: input summary and warnings, the paper's table side by side with ours, the
-    loop's before/after per axis, the figures, and the Kalibr file."""
+def report_markdown(
+    result: AnalysisResult, figures: dict[str, Path], datasheet: Datasheet | None = None
+) -> str:
+    """``report.md``: input summary and warnings, the final model's terms (next to the paper's
+    for ADIS16364 recordings, and to the datasheet's), the loop's before/after per axis, the
+    figures, and the Kalibr file."""
     inp = result.input
+    datasheet = datasheet or default_datasheet(result)
     md = [
         f"# imupipe report: `{Path(inp.path).name}`",
         "",
@@ -239,13 +206,19 @@ def report_markdown(result: AnalysisResult, figures: dict[str, Path]) -> str:
         md += [f"- {json.dumps(jsonable(s))}" for s in inp.segments] + [""]
     md += ["### Warnings", ""] + ([f"- {w}" for w in inp.warnings] or ["- none"]) + [""]
     md += [
-        "## Noise terms next to the paper",
+        "## Noise terms (final model)",
         "",
-        "Measured value with its interval, the paper's measured value and the datasheet value,"
-        " in the paper's units.",
-        f"Paper: {PAPER_SOURCE}. Datasheet: {DATASHEET_SOURCE}.",
+        "The model after the closed loop (the IEEE 952 fit where it accepted nothing), each"
+        " value with its 95 % interval, in the paper's units.",
+    ]
+    if is_adis16364(result):
+        md.append(f"Paper: {PAPER_SOURCE}.")
+    if datasheet is not None:
+        # part and source come from the user's file: JSON-quoted, no markdown or line breaks
+        md.append(f"Datasheet {json.dumps(datasheet.part)}: {json.dumps(datasheet.source)}.")
+    md += [
         "",
-        _md_table(_ROW_HEADER, paper_rows(result)),
+        _md_table(*paper_rows(result, datasheet)),
         "",
         "Terms the data cannot resolve are shown as their upper bound (≤):",
         "",
@@ -294,12 +267,12 @@ def _loop_details(result: AnalysisResult) -> list[str]:
         if axis.loop is None:
             continue
         md += [f"### {axis.name}", ""]
-        for effect in jsonable(axis.loop.as_effects()):
+        for effect in jsonable(axis.loop.accepted):
             md.append(
                 f"- accepted **{effect['kind']}** ({_params(effect)}): error "
                 f"{_fmt(effect.get('error_before'))} → {_fmt(effect.get('error_after'))}"
             )
-        for cand in jsonable(axis.loop.as_candidates()):
+        for cand in jsonable(axis.loop.rejected):
             md.append(f"- rejected candidate {cand.get('kind')}: {cand.get('reason', '')}".rstrip())
         before, after = axis.loop.terms_before, axis.loop.terms_after
         rows = []
@@ -311,7 +284,12 @@ def _loop_details(result: AnalysisResult) -> list[str]:
     return md
 
 
-def write_report(result: AnalysisResult, out_dir: Path, figures: bool = True) -> dict:
+def write_report(
+    result: AnalysisResult,
+    out_dir: Path,
+    figures: bool = True,
+    datasheet: Datasheet | None = None,
+) -> dict:
     """Write report.json, report.md (+ PNG figures), imu.yaml and allan.parquet into ``out_dir``.
 
     Returns the report.json document.
@@ -326,7 +304,7 @@ def write_report(result: AnalysisResult, out_dir: Path, figures: bool = True) ->
         from imupipe.report.figures import write_figures
 
         pngs = write_figures(result, out_dir)
-    (out_dir / "report.md").write_text(report_markdown(result, pngs))
-    (out_dir / "imu.yaml").write_text(kalibr_yaml(result))
+    (out_dir / "report.md").write_text(report_markdown(result, pngs, datasheet))
+    write_exports(doc, ["kalibr"], out_dir)
     allan_frame(result).write_parquet(out_dir / "allan.parquet")
     return doc

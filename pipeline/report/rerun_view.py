@@ -46,6 +46,8 @@ from imupipe.report.report import (
     _loop_rows,
     _md_table,
     _term_text,
+    default_datasheet,
+    is_adis16364,
 )
 from imupipe.units import PAPER_UNIT, SI_UNIT, from_si
 from imupipe.vocab import ACCEL_AXES, GYRO_AXES
@@ -442,6 +444,7 @@ def summary_markdown(result: AnalysisResult) -> str:
         "datasheet",
         "unit",
     )
+    datasheet, adis = default_datasheet(result), is_adis16364(result)
     for sensor in SENSORS:
         axes = result.by_sensor(sensor)
         if not axes:
@@ -450,9 +453,10 @@ def summary_markdown(result: AnalysisResult) -> str:
         for name, label in (*_PAPER_QUANTITIES, *_OTHER_TERMS):
             si, paper_unit = SI_UNIT[sensor][name], PAPER_UNIT[sensor][name]
             for axis in axes:
-                ref = PAPER_TABLE.get(name, {}).get(axis.name)
+                ref = PAPER_TABLE.get(name, {}).get(axis.name) if adis else None
                 paper = None if ref is None else ref.measured_si()
-                sheet = None if ref is None else ref.datasheet_si()
+                spec = None if datasheet is None else datasheet.get(sensor, name)
+                sheet = None if spec is None else spec.si()
                 rows.append(
                     (
                         label,
