@@ -6,8 +6,10 @@ line on stderr and exit code 2.  Set ``IMUPIPE_DEBUG=1`` to see tracebacks of in
 
 from __future__ import annotations
 
+import hashlib
 import os
 import signal
+import string
 import sys
 from dataclasses import asdict, replace
 from enum import StrEnum
@@ -17,6 +19,7 @@ from typing import Annotated
 import typer
 
 from imupipe.errors import ImupipeError
+from imupipe.escape import printable
 
 app = typer.Typer(
     add_completion=False,
@@ -42,13 +45,52 @@ ALL_TOPICS = "all"
 """``--topic all``: analyse every IMU topic, each into its own subfolder."""
 
 
+_FOLDER_SAFE = frozenset(string.ascii_letters + string.digits + "_-")
+_FOLDER_MAX = 200
+"""Longest folder name :func:`topic_folder` makes (most file systems allow 255 bytes)."""
+
+
+def _quote(part: str) -> str:
+    """``part`` with every character outside [A-Za-z0-9_-] as %XX of its UTF-8 bytes."""
+    return "".join(
+        c if c in _FOLDER_SAFE else "".join(f"%{b:02X}" for b in c.encode("utf-8", "surrogatepass"))
+        for c in part
+    )
+
+
 def topic_folder(topic: str) -> str:
-    """Subfolder name for a topic's reports: ``/imu0/data_raw`` → ``imu0_data_raw``."""
-    return topic.strip("/").replace("/", "_") or "root"
+    """Subfolder name of a topic's reports under ``--topic all``: ``/imu0/data_raw`` →
+    ``imu0.data_raw``.
+
+    The name is one path component that can never be ``.``, ``..`` or empty, so the reports
+    stay inside ``--out``; and it is injective, so two topics never share a folder: the leading
+    ``/`` is dropped and the others become ``.`` (when a level is empty, every ``/`` is ``%2F``),
+    every other character outside [A-Za-z0-9_-] is ``%XX`` (``.``, ``%``, a NUL...), a topic
+    without the leading ``/`` starts with ``%%``, and a name longer than :data:`_FOLDER_MAX`
+    ends in ``~`` and 16 hex digits of the topic's SHA-256 (``~`` appears in no other name).
+    """
+    relative = not topic.startswith("/")
+    parts = (topic if relative else topic[1:]).split("/")
+    if "" in parts:  # "/", "//a", "/a/": a level is empty, so every "/" is quoted
+        name = ("" if relative else "%2F") + "%2F".join(_quote(p) for p in parts)
+    else:
+        name = ".".join(_quote(p) for p in parts)
+    name = ("%%" if relative else "") + name
+    if len(name) > _FOLDER_MAX:
+        digest = hashlib.sha256(topic.encode("utf-8", "surrogatepass")).hexdigest()[:16]
+        name = f"{name[: _FOLDER_MAX - 17]}~{digest}"
+    return name
 
 
 def _warn(message: str) -> None:
-    typer.echo(f"warning: {message}", err=True)
+    typer.echo(f"warning: {printable(message)}", err=True)
+
+
+def _say(text: str) -> None:
+    """Print ``text`` line by line, each with its control characters escaped (strings from the
+    input never reach the terminal raw: :func:`imupipe.escape.printable`)."""
+    for line in text.split("\n"):
+        typer.echo(printable(line))
 
 
 @app.command()
@@ -92,7 +134,7 @@ def record(
         progress=not quiet,
     )
     if not quiet:
-        typer.echo(
+        _say(
             f"{summary.path}: {summary.frames} frames, {summary.duration_s:.1f} s at "
             f"{summary.rate_hz:g} Hz ({summary.rate_method}), "
             f"{summary.path.stat().st_size / 1e6:.1f} MB"
@@ -109,7 +151,7 @@ def info(path: Annotated[Path, typer.Argument(help="MCAP file or rosbag2 directo
     from imupipe.io.info import describe
 
     for line in describe(path).lines():
-        typer.echo(line)
+        _say(printable(line))
 
 
 @app.command()
@@ -161,7 +203,7 @@ def analyze(
     for name in topics:
         sub = out_dir / topic_folder(name)
         if not quiet:
-            typer.echo(f"== {name} -> {sub}/")
+            _say(printable(f"== {name} -> {sub}/"))
         try:
             _analyze_one(path, sub, replace(options, topic=name), quiet)
         except ImupipeError as exc:
@@ -182,8 +224,8 @@ def _analyze_one(path: Path, out_dir: Path, options, quiet: bool) -> None:
     for w in result.input.warnings:
         _warn(w)
     if not quiet:
-        typer.echo(format_table(result))
-        typer.echo(f"reports written to {out_dir}/")
+        _say(format_table(result))
+        _say(printable(f"reports written to {out_dir}/"))
 
 
 @app.command()
@@ -241,12 +283,10 @@ def main() -> None:
     try:
         code = app(standalone_mode=False)  # typer.Exit(n) comes back as n here
     except ImupipeError as exc:
-        typer.echo(f"imupipe: error: {exc}", err=True)
+        typer.echo(f"imupipe: error: {printable(str(exc))}", err=True)
         sys.exit(2)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, typer.Abort):  # click turns Ctrl-C into Abort
         typer.echo("imupipe: interrupted", err=True)
-        sys.exit(130)
-    except typer.Abort:
         sys.exit(130)
     except Exception as exc:  # usage errors (typer's click) and anything unexpected: one line
         if hasattr(exc, "show") and hasattr(exc, "exit_code"):  # click.ClickException
@@ -254,7 +294,8 @@ def main() -> None:
             sys.exit(exc.exit_code)
         if os.environ.get("IMUPIPE_DEBUG"):
             raise
-        typer.echo(f"imupipe: internal error: {type(exc).__name__}: {exc}", err=True)
+        message = printable(f"{type(exc).__name__}: {exc}")
+        typer.echo(f"imupipe: internal error: {message}", err=True)
         sys.exit(1)
     sys.exit(code if isinstance(code, int) else 0)
 

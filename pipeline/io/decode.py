@@ -21,6 +21,8 @@ only serves to choose the time base and is not kept (35 MB for 12 h at 100 Hz).
 
 from __future__ import annotations
 
+import os
+import re
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -386,36 +388,74 @@ def _seconds(cols: dict[str, np.ndarray], use_log: bool, keep_stamps: bool) -> n
     return _map_chunks(base, lambda b: (b - first) / 1e9, out)
 
 
-def mcap_files(path: Path) -> list[Path]:
-    """The MCAP files of a recording: the file itself, or a rosbag2 directory's split files.
+def _natural_key(file: Path) -> list[str | int]:
+    """Sort key reading the digit runs of a name as numbers: bag_2 before bag_10."""
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", file.name)]
+
+
+def _listed_files(bag: Path, meta: Path) -> list[str]:
+    """The ``relative_file_paths`` entries of a rosbag2 ``metadata.yaml``, as written."""
+    listed: list[str] = []
+    in_list = False
+    for line in meta.read_text(errors="replace").splitlines():
+        stripped = line.strip()
+        if stripped.startswith("relative_file_paths:"):
+            in_list = True
+        elif in_list and stripped.startswith("- "):
+            listed.append(stripped[2:].strip().strip("'\""))
+        elif in_list and stripped:
+            in_list = False
+    return listed
+
+
+def bag_files(path: Path) -> tuple[list[Path], list[str]]:
+    """The MCAP files of a recording and warnings about them: the file itself, or a rosbag2
+    directory's split files.
 
     A rosbag2 directory lists its files in ``metadata.yaml`` (``relative_file_paths``) in
-    recording order; without one, the directory's ``*.mcap`` files are taken in name order.
+    recording order; a listed file that is missing is warned about.  Without the list (a killed
+    recorder leaves none), the directory's ``*.mcap`` files are taken in natural name order
+    (bag_2 before bag_10).
+
+    Raises:
+        InputError: not a file, empty, a directory without MCAP files, a listed path that
+            leaves the directory (absolute or with ``..``), or a split file that is not a
+            regular file (a FIFO, a folder, a dangling link).
     """
     if path.is_file():
         if path.stat().st_size == 0:
             raise InputError(f"{path}: empty file")
-        return [path]
+        return [path], []
     if not path.is_dir():
         raise InputError(f"{path}: not a file")
-    listed: list[Path] = []
+    warnings: list[str] = []
+    files: list[Path] = []
     meta = path / "metadata.yaml"
     if meta.is_file():
-        in_list = False
-        for line in meta.read_text(errors="replace").splitlines():
-            stripped = line.strip()
-            if stripped.startswith("relative_file_paths:"):
-                in_list = True
-            elif in_list and stripped.startswith("- "):
-                listed.append(path / stripped[2:].strip().strip("'\""))
-            elif in_list and stripped:
-                in_list = False
-    files = [f for f in listed if f.suffix == ".mcap" and f.is_file()]
+        for entry in _listed_files(path, meta):
+            if Path(entry).is_absolute() or ".." in Path(entry).parts:
+                raise InputError(
+                    f"{meta}: lists {entry!r}, outside the bag directory; refusing to read it"
+                )
+            if not entry.endswith(".mcap"):
+                continue
+            if os.path.lexists(path / entry):
+                files.append(path / entry)
+            else:
+                warnings.append(f"{meta.name} lists {entry}, which is missing")
     if not files:
-        files = sorted(path.glob("*.mcap"))
+        files = sorted(path.glob("*.mcap"), key=_natural_key)
     if not files:
         raise InputError(f"{path}: a directory without MCAP files")
-    return files
+    for file in files:
+        if not file.is_file():
+            raise InputError(f"{file}: not a regular file (a FIFO, a folder or a broken link?)")
+    return files, warnings
+
+
+def mcap_files(path: Path) -> list[Path]:
+    """The MCAP files of a recording (:func:`bag_files` without its warnings)."""
+    return bag_files(path)[0]
 
 
 def decode(
@@ -438,7 +478,7 @@ def decode(
         InputError: not a file, not MCAP, no IMU topic, ambiguous or unknown ``topic``.
     """
     path = Path(path)
-    files = mcap_files(path)
+    files, file_warnings = bag_files(path)
     kinds = {SCHEMA_NAME: "adis16364", IMU_SCHEMA: "imu", TEMPERATURE_SCHEMA: "temperature"}
 
     def wanted(channel: Channel, schema: Schema | None) -> bool:
@@ -449,7 +489,7 @@ def decode(
     topic_kind: dict[str, str] = {}
     all_topics: set[str] = set()
     metadata: dict[str, dict[str, str]] = {}
-    warnings: list[str] = []
+    warnings: list[str] = list(file_warnings)
     done = 0
     layouts = {  # kind: (decoder, alignment of the fields after the header, their size in bytes)
         "adis16364": (lambda run, out: _decode_adis_run(run, out, columns), 4, TAIL_SIZE),

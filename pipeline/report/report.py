@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -23,6 +24,7 @@ from imupipe.analysis.results import (
     jsonable,
     report_json,
 )
+from imupipe.escape import printable
 from imupipe.report.paper import DATASHEET_RANDOM_WALK, DATASHEET_SOURCE, PAPER_SOURCE, PAPER_TABLE
 from imupipe.units import PAPER_UNIT, from_si
 from imupipe.vocab import TERM_NAMES
@@ -128,6 +130,29 @@ def _text_table(header: tuple[str, ...], rows: Iterable[tuple[str, ...]]) -> str
     )
 
 
+_MD_SPECIAL = re.compile(r"([\\`*_\[\]<>#!~&])")
+"""ASCII punctuation with a meaning inside a line in CommonMark/GFM (code, emphasis, links,
+images, HTML, entities, strikethrough; ``#`` closes a heading).  Input strings never start a
+line here, so list and heading markers need no escape, and ``|`` is escaped by
+:func:`_md_table`, the only place a pipe means something."""
+
+
+def _md(text: str) -> str:
+    """A string from the input (path, topic, metadata, a warning naming them) as literal
+    Markdown text: control characters escaped (:func:`imupipe.escape.printable`: one line, so it
+    cannot start a heading or a table), Markdown punctuation backslash-escaped (CommonMark 2.4),
+    so that no emphasis, link, image or HTML tag comes from the input."""
+    return _MD_SPECIAL.sub(r"\\\1", printable(text))
+
+
+def _fence(text: str, info: str) -> list[str]:
+    """A fenced code block whose fence is longer than any backtick run in ``text``
+    (CommonMark 4.5), so the text cannot close it."""
+    longest = max((len(run) for run in re.findall("`+", text)), default=0)
+    fence = "`" * max(3, longest + 1)
+    return [fence + info, text, fence]
+
+
 def _md_table(header: tuple[str, ...], rows: Iterable[tuple[str, ...]]) -> str:
     def line(cells: tuple[str, ...]) -> str:
         return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
@@ -139,7 +164,8 @@ def format_table(result: AnalysisResult) -> str:
     """The paper-style terminal table printed by ``imupipe analyze``."""
     inp = result.input
     head = (
-        f"{inp.path} [{inp.topic}]: {inp.frames} frames, {inp.rate_hz:.4g} Hz, "
+        f"{printable(inp.path)} [{printable(inp.topic)}]: {inp.frames} frames, "
+        f"{inp.rate_hz:.4g} Hz, "
         f"{inp.duration_s / 3600:.3g} h analysed"
     )
     parts = [head, _text_table(_ROW_HEADER, paper_rows(result))]
@@ -147,7 +173,7 @@ def format_table(result: AnalysisResult) -> str:
     if loop_rows:
         parts.append(f"closed loop (error = {ERROR_MEASURE}):")
         parts.append(_text_table(_LOOP_HEADER, loop_rows))
-    parts += [f"warning: {w}" for w in inp.warnings]
+    parts += [f"warning: {printable(w)}" for w in inp.warnings]
     return "\n".join(parts)
 
 
@@ -213,7 +239,7 @@ def report_markdown(result: AnalysisResult, figures: dict[str, Path]) -> str:
     loop's before/after per axis, the figures, and the Kalibr file."""
     inp = result.input
     md = [
-        f"# imupipe report: `{Path(inp.path).name}`",
+        f"# imupipe report: {_md(Path(inp.path).name)}",
         "",
         "## Input",
         "",
@@ -221,8 +247,8 @@ def report_markdown(result: AnalysisResult, figures: dict[str, Path]) -> str:
             ("path", "topic", "source", "frames", "rate", "duration"),
             [
                 (
-                    f"`{inp.path}`",
-                    f"`{inp.topic}`",
+                    _md(inp.path),
+                    _md(inp.topic),
                     inp.source,
                     str(inp.frames),
                     f"{inp.rate_hz:.6g} Hz",
@@ -233,11 +259,11 @@ def report_markdown(result: AnalysisResult, figures: dict[str, Path]) -> str:
         "",
     ]
     if result.device:
-        md += ["Device: " + ", ".join(f"{k} = {v}" for k, v in result.device.items()), ""]
+        md += ["Device: " + ", ".join(f"{_md(k)} = {_md(v)}" for k, v in result.device.items()), ""]
     if inp.segments:
         md += [f"Segments: {len(inp.segments)}", ""]
         md += [f"- {json.dumps(jsonable(s))}" for s in inp.segments] + [""]
-    md += ["### Warnings", ""] + ([f"- {w}" for w in inp.warnings] or ["- none"]) + [""]
+    md += ["### Warnings", ""] + ([f"- {_md(w)}" for w in inp.warnings] or ["- none"]) + [""]
     md += [
         "## Noise terms next to the paper",
         "",
@@ -271,7 +297,7 @@ def report_markdown(result: AnalysisResult, figures: dict[str, Path]) -> str:
         md += _loop_details(result)
     md += ["## Figures", ""]
     md += [f"![{name}]({path.name})" for name, path in figures.items()] + [""]
-    md += ["## Kalibr `imu.yaml`", "", "```yaml", kalibr_yaml(result).rstrip(), "```", ""]
+    md += ["## Kalibr `imu.yaml`", "", *_fence(kalibr_yaml(result).rstrip(), "yaml"), ""]
     return "\n".join(md)
 
 
