@@ -20,6 +20,7 @@ from imupipe.analysis.condition import ConditionedSeries, condition
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.errors import TooFewFramesError
 from imupipe.io.decode import ImuRecording, decode, mcap_files
+from imupipe.io.mcap_scan import chunk_limit
 from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
 from imupipe.progress import StageProgress
@@ -161,7 +162,12 @@ def analyze(
         return analyze_low_memory(path, out_dir, options, progress)
     size = sum(f.stat().st_size for f in files)
     with progress.stage("decode", size, "bytes") as advance:
-        rec = decode(path, topic=options.topic, progress=advance)
+        rec = decode(
+            path,
+            topic=options.topic,
+            progress=advance,
+            max_chunk_bytes=chunk_limit(options.memory_budget_bytes),
+        )
     series = condition(rec, gaps=options.gaps)
     out_dir.mkdir(parents=True, exist_ok=True)
     rrd = RrdWriter(out_dir / "recording.rrd", series.frames) if options.rrd else None

@@ -38,6 +38,7 @@ from imupipe.analysis.analyze import (
 from imupipe.analysis.condition import Segment, condition, is_stuck, stuck_warning
 from imupipe.analysis.results import AnalysisResult, AxisResult
 from imupipe.io.decode import decode, mcap_files
+from imupipe.io.mcap_scan import chunk_limit
 from imupipe.model.effects import psd_line, spike_candidate
 from imupipe.model.loop import aux_block_means
 from imupipe.progress import StageProgress
@@ -161,7 +162,14 @@ def analyze_low_memory(
     def decode_pass(k: int, what: str, columns: frozenset[str]):
         _release_freed_memory()
         with progress.stage(f"decode {k}/{passes} {what}", size, "bytes") as advance:
-            return decode(path, options.topic, advance, columns, keep_one_time_base=True)
+            return decode(
+                path,
+                options.topic,
+                advance,
+                columns,
+                keep_one_time_base=True,
+                max_chunk_bytes=chunk_limit(options.memory_budget_bytes),
+            )
 
     with progress.stage("compile", 1, "step"):
         _load_kernels(options.loop)

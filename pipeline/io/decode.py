@@ -35,7 +35,7 @@ from mcap.records import Channel, Schema
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
 from imupipe.errors import InputError
-from imupipe.io.mcap_scan import McapScanner, MessageRun
+from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, McapScanner, MessageRun
 from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
 from imupipe.vocab import AXES
 
@@ -464,6 +464,7 @@ def decode(
     progress: Callable[[int], None] | None = None,
     columns: frozenset[str] | None = None,
     keep_one_time_base: bool = False,
+    max_chunk_bytes: int = MAX_CHUNK_BYTES,
 ) -> ImuRecording:
     """Decode the IMU channel of an MCAP file or rosbag2 directory (contract: module docstring).
 
@@ -473,6 +474,8 @@ def decode(
     ``keep_one_time_base``: for ``t_s``, keep only the header stamps while reading (both bases'
     monotonicity is counted on the way) and read the file again for the log time in the rare
     case the stamps are unset or broken — one int64 column less at the peak.
+    ``max_chunk_bytes``: chunks declaring more uncompressed bytes are skipped unread
+    (:func:`imupipe.io.mcap_scan.chunk_limit` of the memory budget).
 
     Raises:
         InputError: not a file, not MCAP, no IMU topic, ambiguous or unknown ``topic``.
@@ -500,7 +503,10 @@ def decode(
     for file in files:
         offset = done
         scanner = McapScanner(
-            file, wanted=wanted, progress=progress and (lambda n, o=offset: progress(o + n))
+            file,
+            wanted=wanted,
+            progress=progress and (lambda n, o=offset: progress(o + n)),
+            max_chunk_bytes=max_chunk_bytes,
         )
         report = scanner.report
         for run in scanner.runs():
@@ -552,7 +558,7 @@ def decode(
     if columns is None or "t_s" in columns:
         use_log = _uses_log_time(channels[topic].steps, warnings)
         if use_log and "log_time_ns" not in cols:  # counted, not kept: read again, keeping it
-            return decode(path, topic, progress, columns)
+            return decode(path, topic, progress, columns, max_chunk_bytes=max_chunk_bytes)
         keep_stamps = columns is None or not columns.isdisjoint({"stamp_ns", "temp_c"})
         t_s = _seconds(cols, use_log, keep_stamps)
         time_source = "log_time" if use_log else "header.stamp"
