@@ -7,6 +7,7 @@ line on stderr and exit code 2.  Set ``IMUPIPE_DEBUG=1`` to see tracebacks of in
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import signal
 import string
@@ -184,6 +185,10 @@ def analyze(
     from imupipe.analysis.analyze import AnalyzeOptions
     from imupipe.api import default_out_dir
 
+    if not math.isfinite(memory_budget_gb):
+        raise ImupipeError(
+            f"--memory-budget-gb must be a finite number of GB, got {memory_budget_gb}"
+        )
     out_dir = out if out is not None else default_out_dir(path)
     options = AnalyzeOptions(
         topic=topic,
@@ -278,10 +283,29 @@ def demo(
     )
 
 
+class _Stopped(BaseException):
+    """SIGTERM or SIGHUP arrived: unwinds like Ctrl-C (a staged output is removed), but past
+    click, which would turn a KeyboardInterrupt into a bare Abort."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _stop(signum: int, frame: object) -> None:
+    raise _Stopped(signum)
+
+
 def main() -> None:
-    """Console entry point: one-line errors, exit 2 for bad input."""
+    """Console entry point: one-line errors, exit 2 for bad input; SIGINT, SIGTERM and SIGHUP
+    end a command with one line and 128 + the signal (``record`` finishes its file first)."""
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, _stop)
     try:
         code = app(standalone_mode=False)  # typer.Exit(n) comes back as n here
+    except _Stopped as stop:
+        typer.echo(f"imupipe: stopped by {signal.Signals(stop.signum).name}", err=True)
+        sys.exit(128 + stop.signum)
     except ImupipeError as exc:
         typer.echo(f"imupipe: error: {printable(str(exc))}", err=True)
         sys.exit(2)

@@ -13,6 +13,7 @@ columns); ``tau0_s`` is the sampling interval estimated as the segment's mean st
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -74,13 +75,51 @@ class ConditionedSeries:
         return 1.0 / self.tau0_s
 
 
-def is_stuck(y: np.ndarray) -> bool:
-    """A channel constant over the segment (stuck): it has no noise to analyse."""
-    return bool(y.min() == y.max())
+FLOAT_RANGE = (1e-100, 1e100)
+"""Spread and magnitude an axis may have: the Allan variance squares differences of the phase
+(sums of n values), which leave float64 (1e±308, denormals from 2.2e-308) well outside this."""
+GLITCH_FRACTION = 1e-3
+"""A channel equal to one value but for fewer than this fraction of its samples is treated as
+stuck: its few glitches are no noise a fitted N could describe."""
+_SCAN = 1 << 22
+"""Samples compared at a time (4 MB of booleans, not a record-length temporary)."""
 
 
-def stuck_warning(axis: str) -> str:
-    return f"{axis} is constant over the segment (stuck channel?): it is not analysed"
+def _count(y: np.ndarray, differs: Callable[[int], np.ndarray]) -> int:
+    """How many booleans ``differs(start)`` marks true over ``y``, :data:`_SCAN` at a time."""
+    return sum(int(np.count_nonzero(differs(i))) for i in range(0, len(y), _SCAN))
+
+
+def unanalysable(y: np.ndarray) -> str | None:
+    """Why an axis holds no noise the Allan variance can analyse (None when it can): constant
+    (stuck), beyond :data:`FLOAT_RANGE` (values ×1e200, denormals), constant but for a few
+    glitches (:data:`GLITCH_FRACTION`), or a pattern repeating every 2 samples (a 1-LSB channel
+    alternating 0/1: its Allan variance is exactly 0 at every even m)."""
+    lo, hi = float(y.min()), float(y.max())
+    if lo == hi:
+        return "is constant over the segment (stuck channel?)"
+    if max(-lo, hi) > FLOAT_RANGE[1]:
+        return f"reaches {max(-lo, hi):.3g}, beyond what float64 Allan sums hold (1e100)"
+    if hi - lo < FLOAT_RANGE[0]:
+        return f"varies by only {hi - lo:.3g}, below what float64 Allan sums resolve (1e-100)"
+    usual = float(np.median(y[:3]))
+    others = _count(y, lambda i: y[i : i + _SCAN] != usual)
+    if others < GLITCH_FRACTION * len(y):
+        return f"is constant but for {others} sample(s) (glitches?)"
+    later, earlier = y[2:], y[:-2]
+    if _count(later, lambda i: later[i : i + _SCAN] != earlier[i : i + _SCAN]) == 0:
+        return "repeats every 2 samples (a deterministic alternation, no noise)"
+    return None
+
+
+def stuck_warning(axis: str, reason: str) -> str:
+    return f"{axis} {reason}: it is not analysed"
+
+
+def no_axis_error(rec: ImuRecording, why: list[str]) -> ImupipeError:
+    """The error refusing a recording none of whose axes can be analysed (``why``: one
+    :func:`stuck_warning` per axis)."""
+    return ImupipeError(f"{rec.path}: no axis can be analysed: " + "; ".join(why))
 
 
 _CHUNK = 1 << 22
@@ -245,8 +284,11 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
             )
 
     frames = df.slice(seg.start, seg.frames)
-    stuck = [a for a in AXES if a in frames.columns and is_stuck(frames[a].to_numpy())]
-    warnings.extend(stuck_warning(a) for a in stuck)
+    reasons = {a: unanalysable(frames[a].to_numpy()) for a in AXES if a in frames.columns}
+    stuck = [a for a, reason in reasons.items() if reason is not None]
+    warnings.extend(stuck_warning(a, reasons[a]) for a in stuck)
+    if reasons and len(stuck) == len(reasons):
+        raise no_axis_error(rec, [stuck_warning(a, reasons[a]) for a in stuck])
     return ConditionedSeries(
         frames=frames,
         tau0_s=float(tau0),

@@ -35,7 +35,13 @@ from imupipe.analysis.analyze import (
     input_summary,
     write_outputs,
 )
-from imupipe.analysis.condition import Segment, condition, is_stuck, stuck_warning
+from imupipe.analysis.condition import (
+    Segment,
+    condition,
+    no_axis_error,
+    stuck_warning,
+    unanalysable,
+)
 from imupipe.analysis.results import AnalysisResult, AxisResult
 from imupipe.io.decode import decode, mcap_files
 from imupipe.io.mcap_scan import chunk_limit
@@ -196,9 +202,10 @@ def analyze_low_memory(
     results: dict[str, AxisResult] = {}
     for k, name in enumerate(AXES, start=3):
         y = _segment(decode_pass(k, name, frozenset({name})).frames, name, seg)
-        if is_stuck(y):
+        reason = unanalysable(y)
+        if reason is not None:
             series.stuck_axes.append(name)
-            series.warnings.append(stuck_warning(name))
+            series.warnings.append(stuck_warning(name, reason))
             continue
         with progress.stage(f"analyse {name}", 1, "axis") as advance:
             curve = allan_curves([y], series.tau0_s, m)[0]
@@ -208,6 +215,8 @@ def analyze_low_memory(
             advance(1)
         shown[name] = envelope(y)
         del y
+    if not results:
+        raise no_axis_error(rec, series.warnings[-len(AXES) :])
     if options.rrd and n > 2 * ENVELOPE_BINS:
         series.warnings.append(
             f"recording.rrd shows the raw signals as a min/max envelope of {ENVELOPE_BINS} bins "

@@ -204,5 +204,12 @@ def record(
 
 
 def write_truth(path: Path, truth: dict) -> None:
-    """Write the simulator's ground truth (parameters and effects) as JSON."""
-    Path(path).write_text(json.dumps(truth, indent=2, sort_keys=True) + "\n")
+    """Write the simulator's ground truth (parameters and effects) as JSON.
+
+    Raises:
+        ImupipeError: the file cannot be written.
+    """
+    try:
+        Path(path).write_text(json.dumps(truth, indent=2, sort_keys=True) + "\n")
+    except OSError as exc:
+        raise ImupipeError(f"cannot write the truth file {path}: {exc.strerror or exc}") from None
