@@ -111,6 +111,7 @@ def input_summary(rec: ImuRecording, series: ConditionedSeries, n: int) -> Input
         source=rec.source,
         time_source=rec.time_source,
         counts=series.counts,
+        temperature_topic=rec.temperature_topic,
     )
 
 

@@ -59,6 +59,7 @@ class ImuRecording:
     device: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     topics: list[str] = field(default_factory=list)
+    temperature_topic: str | None = None
 
 
 def _stamps(payloads: np.ndarray) -> np.ndarray:
@@ -342,20 +343,17 @@ def _imu_frame(
     return pl.DataFrame({k: makers[k]() for k in wanted})
 
 
+def _namespace(topic: str) -> str:
+    return topic.rpartition("/")[0]
+
+
 def _sibling_temperature(imu_topic: str, temp_topics: list[str]) -> str | None:
-    """The Temperature topic sharing the longest namespace prefix with the IMU topic."""
-    if not temp_topics:
-        return None
-    imu_parts = imu_topic.strip("/").split("/")
-
-    def shared(t: str) -> int:
-        parts = t.strip("/").split("/")
-        return next(
-            (i for i, (a, b) in enumerate(zip(parts, imu_parts, strict=False)) if a != b),
-            min(len(parts), len(imu_parts)),
-        )
-
-    return max(temp_topics, key=shared)
+    """The Temperature topic of the IMU: the first by name in the IMU topic's namespace or
+    below it (``/imu/data`` → ``/imu/temperature``, ``/imu/temp/raw``); None when there is
+    none: a temperature elsewhere (``/battery/temperature``) belongs to another device."""
+    ns = _namespace(imu_topic)
+    own = sorted(t for t in temp_topics if _namespace(t) == ns or (ns and t.startswith(ns + "/")))
+    return own[0] if own else None
 
 
 def _uses_log_time(steps: dict[str, _Steps], warnings: list[str]) -> bool:
@@ -458,6 +456,26 @@ def mcap_files(path: Path) -> list[Path]:
     return bag_files(path)[0]
 
 
+def _same_device(
+    path: Path, seen: dict[str, dict[str, str]], new: dict[str, dict[str, str]], file: Path
+) -> None:
+    """Refuse split files whose ``adis16364`` metadata differ: each file's counts would need
+    its own scale factors (e.g. two gyro ranges), and one factor for all would be wrong.
+
+    Raises:
+        InputError: naming the keys that differ.
+    """
+    before, after = seen.get(METADATA_NAME), new.get(METADATA_NAME)
+    if before is None or after is None or before == after:
+        return
+    keys = sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k))
+    raise InputError(
+        f"{path}: {file.name} carries different '{METADATA_NAME}' metadata than the files "
+        f"before it ({', '.join(keys)}): one scale for all would be wrong; analyse the files "
+        "separately"
+    )
+
+
 def decode(
     path: Path,
     topic: str | None = None,
@@ -485,7 +503,15 @@ def decode(
     kinds = {SCHEMA_NAME: "adis16364", IMU_SCHEMA: "imu", TEMPERATURE_SCHEMA: "temperature"}
 
     def wanted(channel: Channel, schema: Schema | None) -> bool:
-        return schema is not None and schema.name in kinds
+        if schema is None or schema.name not in kinds:
+            return False
+        kind = topic_kind.setdefault(channel.topic, kinds[schema.name])
+        if kind != kinds[schema.name]:  # its messages cannot share one set of columns
+            raise InputError(
+                f"{path}: topic {channel.topic!r} carries two message types "
+                f"({kind} and {kinds[schema.name]}); refusing to mix them"
+            )
+        return True
 
     skip = frozenset({"log_time_ns"} if keep_one_time_base else ())
     channels: dict[str, _Columns] = defaultdict(lambda: _Columns(skip))
@@ -522,6 +548,7 @@ def decode(
                     channels[channel.topic],
                 )
         done += report.file_bytes
+        _same_device(path, metadata, report.metadata, file)
         metadata.update(report.metadata)
         prefix = f"{file.name}: " if len(files) > 1 else ""
         warnings.extend(prefix + d for d in report.damage())
@@ -562,6 +589,7 @@ def decode(
         keep_stamps = columns is None or not columns.isdisjoint({"stamp_ns", "temp_c"})
         t_s = _seconds(cols, use_log, keep_stamps)
         time_source = "log_time" if use_log else "header.stamp"
+    temp_topic = None
     if topic_kind[topic] == "adis16364":
         if METADATA_NAME not in metadata:
             raise InputError(
@@ -596,4 +624,5 @@ def decode(
         device=device_meta,
         warnings=warnings,
         topics=imu_topics,
+        temperature_topic=temp_topic,
     )
