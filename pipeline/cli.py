@@ -284,8 +284,8 @@ def demo(
 
 
 class _Stopped(BaseException):
-    """SIGTERM or SIGHUP arrived: unwinds like Ctrl-C (a staged output is removed), but past
-    click, which would turn a KeyboardInterrupt into a bare Abort."""
+    """SIGINT, SIGTERM or SIGHUP arrived: unwinds like Ctrl-C (a staged output is removed), but
+    past typer, which turns a KeyboardInterrupt into a silent exit 130."""
 
     def __init__(self, signum: int) -> None:
         super().__init__(signum)
@@ -299,17 +299,26 @@ def _stop(signum: int, frame: object) -> None:
 def main() -> None:
     """Console entry point: one-line errors, exit 2 for bad input; SIGINT, SIGTERM and SIGHUP
     end a command with one line and 128 + the signal (``record`` finishes its file first)."""
-    for signum in (signal.SIGTERM, signal.SIGHUP):
-        signal.signal(signum, _stop)
+    previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    try:
+        _run()
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _run() -> None:
     try:
         code = app(standalone_mode=False)  # typer.Exit(n) comes back as n here
     except _Stopped as stop:
-        typer.echo(f"imupipe: stopped by {signal.Signals(stop.signum).name}", err=True)
+        name = signal.Signals(stop.signum).name
+        said = "interrupted" if stop.signum == signal.SIGINT else f"stopped by {name}"
+        typer.echo(f"imupipe: {said}", err=True)
         sys.exit(128 + stop.signum)
     except ImupipeError as exc:
         typer.echo(f"imupipe: error: {printable(str(exc))}", err=True)
         sys.exit(2)
-    except (KeyboardInterrupt, typer.Abort):  # click turns Ctrl-C into Abort
+    except typer.Abort:
         typer.echo("imupipe: interrupted", err=True)
         sys.exit(130)
     except Exception as exc:  # usage errors (typer's click) and anything unexpected: one line
