@@ -616,3 +616,38 @@ def test_structurally_hostile_mcap_is_exit_2_or_a_warning(
     else:
         assert code == 0, err
         assert err.startswith("warning: "), err  # what was skipped is stated
+
+
+# --- 11. a rate switching from 200 to 100 Hz -----------------------------------------------
+
+
+def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, capsys) -> None:
+    """White noise of N = 1e-3 rad/s/√Hz, 24000 frames at 200 Hz then 16000 at 100 Hz: the
+    200 Hz part is analysed alone and N comes out right (as one series it was ~10 % low)."""
+    fast, slow = 24_000, 16_000
+    t_ns = np.concatenate(
+        [np.arange(fast) * 5_000_000, fast * 5_000_000 + np.arange(1, slow + 1) * 10_000_000]
+    )
+    rate = np.where(np.arange(fast + slow) < fast, 200.0, 100.0)
+    rng = np.random.default_rng(4)
+    white = rng.normal(0, 1, (fast + slow, 6)) * (1e-3 * np.sqrt(rate))[:, None]
+    log = hm.T0_NS + t_ns
+    path = tmp_path / "f.mcap"
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        w.write_chunk(cid, log, imu_payloads(log, white[:, :3], white[:, 3:]))
+        w.finish()
+    code, _, err = cli(analyze_args(path, tmp_path / "out"), capsys)
+    assert code == 0, err
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["input"]["rate_hz"] == pytest.approx(200.0, rel=1e-9)
+    assert fast - 256 <= report["input"]["frames"] <= fast
+    assert any(
+        w.startswith("the sample rate changes 1 time(s) (200 Hz from frame 0, 100 Hz from frame")
+        for w in report["input"]["warnings"]
+    )
+    assert not any("jitter" in w for w in report["input"]["warnings"])
+    for axis in ("gyro_x", "gyro_y", "gyro_z"):
+        n_fit = report["axes"][axis]["ieee952"]["random_walk"]["value"]
+        assert n_fit == pytest.approx(1e-3, rel=0.03)

@@ -137,6 +137,44 @@ def _nominal_rate(rec: ImuRecording, t: np.ndarray) -> float:
     return 1.0 / step
 
 
+RATE_BLOCK = 256
+"""Stamp steps per block whose median follows the sample rate (a gap or a bad stamp in a block
+does not move its median)."""
+RATE_CHANGE = 0.1
+"""Blocks whose median steps differ by more than this fraction are at different rates."""
+
+
+def _block_median_steps(t: np.ndarray) -> np.ndarray:
+    """Median stamp step of each block of :data:`RATE_BLOCK` steps (the last partial block
+    left out), :data:`_CHUNK` steps at a time (a multiple of the block)."""
+    parts = []
+    for i in range(0, len(t) - 1, _CHUNK):
+        steps = np.diff(t[i : min(i + _CHUNK, len(t) - 1) + 1])
+        k = len(steps) // RATE_BLOCK
+        parts.append(np.median(steps[: k * RATE_BLOCK].reshape(k, RATE_BLOCK), axis=1))
+    return np.concatenate(parts) if parts else np.empty(0)
+
+
+def rate_regimes(t: np.ndarray) -> list[tuple[int, int, float]]:
+    """The parts of a recording at one sample rate: (first row, stop row, median step in s)
+    each, in order; one part unless the block median step (:func:`_block_median_steps`) jumps
+    by more than :data:`RATE_CHANGE` between neighbouring blocks and stays there for at least
+    two blocks (a rate switched from 200 to 100 Hz).  A slow drift of the rate is one part."""
+    medians = _block_median_steps(t)
+    if len(medians) < 4:
+        return [(0, len(t), float(np.median(np.diff(t))) if len(t) > 1 else np.nan)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        jump = np.abs(np.log(medians[1:] / medians[:-1])) > np.log1p(RATE_CHANGE)
+    lasting = jump.copy()
+    lasting[:-1] &= ~jump[1:]  # the next block stays at the new rate (not a one-block spike)
+    lasting[-1] = False
+    blocks = [0, *(np.flatnonzero(lasting) + 1).tolist(), len(medians)]
+    return [
+        (a * RATE_BLOCK, b * RATE_BLOCK if b < len(medians) else len(t), float(np.median(m)))
+        for a, b, m in ((a, b, medians[a:b]) for a, b in itertools.pairwise(blocks))
+    ]
+
+
 def _breaks(
     t: np.ndarray, counter: np.ndarray | None, threshold: float, period: float
 ) -> tuple[np.ndarray, dict[str, int]]:
@@ -198,10 +236,21 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
     n = df.height
     if n < 2:
         raise ImupipeError(f"{rec.path}: {n} frame(s), too few for any averaging time")
+    warnings = list(rec.warnings)
+    regimes = rate_regimes(df["t_s"].to_numpy())
+    offset = 0
+    if len(regimes) > 1:  # analyse the longest part at one rate, as if the rest were a gap
+        offset, stop, step = max(regimes, key=lambda r: r[1] - r[0])
+        rates = ", ".join(f"{1 / r[2]:.4g} Hz from frame {r[0]}" for r in regimes)
+        warnings.append(
+            f"the sample rate changes {len(regimes) - 1} time(s) ({rates}): analysing the "
+            f"longest part at one rate, frames {offset}..{stop - 1} ({1 / step:.4g} Hz)"
+        )
+        df = df.slice(offset, stop - offset)
+        n = df.height
     t = df["t_s"].to_numpy()
     rate = _nominal_rate(rec, t)
     period = 1.0 / rate
-    warnings = list(rec.warnings)
 
     if "nonfinite" in df.columns:  # a frame decoded without its axes (imupipe.analysis.lowmem)
         nonfinite = df["nonfinite"].to_numpy()
@@ -236,7 +285,9 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
         padded = np.concatenate(([False], good[a:b], [False]))
         change = np.flatnonzero(padded[1:] != padded[:-1]) + a
         for start, stop in change.reshape(-1, 2).tolist():
-            segments.append(Segment(start, stop, float(t[start]), float(t[stop - 1])))
+            segments.append(
+                Segment(start + offset, stop + offset, float(t[start]), float(t[stop - 1]))
+            )
     if not segments:
         raise ImupipeError(f"{rec.path}: no usable frames (all non-finite or saturated)")
 
@@ -267,7 +318,7 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
             f"out of {len(segments)} segments"
         )
 
-    seg_t = t[seg.start : seg.stop]
+    seg_t = t[seg.start - offset : seg.stop - offset]
     tau0 = (seg_t[-1] - seg_t[0]) / (seg.frames - 1) if seg.frames > 1 else period
     if seg.frames > 2:
         jitter = _step_jitter(seg_t) / tau0
@@ -283,7 +334,7 @@ def condition(rec: ImuRecording, gaps: Literal["longest", "fail"] = "longest") -
                 "the measured rate is used"
             )
 
-    frames = df.slice(seg.start, seg.frames)
+    frames = rec.frames.slice(seg.start, seg.frames)
     reasons = {a: unanalysable(frames[a].to_numpy()) for a in AXES if a in frames.columns}
     stuck = [a for a, reason in reasons.items() if reason is not None]
     warnings.extend(stuck_warning(a, reasons[a]) for a in stuck)
