@@ -179,6 +179,13 @@ def analyze(
             "in passes (one axis at a time; same results).",
         ),
     ] = 2.0,
+    temperature_topic: Annotated[
+        str | None,
+        typer.Option(
+            help="sensor_msgs/msg/Temperature topic of the IMU (default: the one in the IMU "
+            "topic's namespace or with its frame_id; none otherwise)."
+        ),
+    ] = None,
     quiet: Quiet = False,
 ) -> None:
     """Analyse a recording: Allan deviation, IEEE 952 terms, effects; write reports."""
@@ -197,6 +204,7 @@ def analyze(
         loop=loop,
         rrd=rrd,
         memory_budget_bytes=round(memory_budget_gb * 1e9),
+        temperature_topic=temperature_topic,
     )
     if topic != ALL_TOPICS:
         _analyze_one(path, out_dir, options, quiet)

@@ -519,7 +519,9 @@ def test_record_options_that_make_no_recording_are_one_line(tmp_path, capsys, ar
 # --- 10. a Temperature topic of another device ----------------------------------------------
 
 
-def imu_with_temperature(path: Path, temperature_topic: str) -> Path:
+def imu_with_temperature(path: Path, temperature_topic: str, frame: bytes = b"bat") -> Path:
+    """An Imu topic /imu/data (frame_id "imu") and a Temperature topic (frame_id ``frame``,
+    3 characters) at 31.5 °C."""
     n = 3000
     rng = np.random.default_rng(8)
     log = hm.T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
@@ -531,7 +533,9 @@ def imu_with_temperature(path: Path, temperature_topic: str) -> Path:
         )
         gyro, accel = rng.normal(0, 1e-3, (n, 3)), rng.normal(0, 1e-2, (n, 3))
         w.write_chunk(cid, log, imu_payloads(log, gyro, accel))
-        w.write_chunk(tid, log[::100], temperature_payloads(log[::100], np.full(30, 31.5)))
+        temp = temperature_payloads(log[::100], np.full(30, 31.5))
+        temp[:, 16:20] = np.frombuffer(frame + b"\0", np.uint8)
+        w.write_chunk(tid, log[::100], temp)
         w.finish()
     return path
 
@@ -559,7 +563,7 @@ def _status(key: str) -> int:
 
 pieces = st.one_of(
     st.tuples(st.just("nested"), st.integers(2, 60)),
-    st.tuples(st.just("bomb"), st.integers(40, 160), st.sampled_from(["zstd", "lz4"])),
+    st.tuples(st.just("bomb"), st.integers(70, 200), st.sampled_from(["zstd", "lz4"])),
     st.tuples(st.just("lie"), st.integers(1, 40), st.sampled_from(["zstd", "lz4", "zstd-"])),
     st.tuples(st.just("claim"), st.integers(10**9, 2**63)),
 )
@@ -652,3 +656,20 @@ def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, capsys) -
     for axis in ("gyro_x", "gyro_y", "gyro_z"):
         n_fit = report["axes"][axis]["ieee952"]["random_walk"]["value"]
         assert n_fit == pytest.approx(1e-3, rel=0.03)
+
+
+def test_a_temperature_topic_by_frame_id_or_by_choice(tmp_path: Path, capsys) -> None:
+    """Item 10: a Temperature topic elsewhere but with the IMU's frame_id is the IMU's; any
+    other is used only when named by --temperature-topic; a wrong name is one line."""
+    rec = decode(imu_with_temperature(tmp_path / "a.mcap", "/sensors/temp", frame=b"imu"))
+    assert rec.temperature_topic == "/sensors/temp"
+    assert rec.frames["temp_c"].to_numpy() == pytest.approx(31.5)
+    path = imu_with_temperature(tmp_path / "b.mcap", "/battery/temperature")
+    args = analyze_args(path, tmp_path / "out", "--temperature-topic", "/battery/temperature")
+    code, _, err = cli(args, capsys)
+    assert code == 0, err
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["input"]["temperature_topic"] == "/battery/temperature"
+    code, _, err = cli(analyze_args(path, tmp_path / "o2", "--temperature-topic", "/no"), capsys)
+    one_error_line(code, err, "--temperature-topic '/no' is not a Temperature topic")
+    assert "(Temperature topics: /battery/temperature)" in err

@@ -48,6 +48,7 @@ class AnalyzeOptions:
     rrd: bool = True
     figures: bool = True
     memory_budget_bytes: int = MEMORY_BUDGET_BYTES
+    temperature_topic: str | None = None
 
 
 def housekeeping(frames: pl.DataFrame, name: str) -> np.ndarray | None:
@@ -168,6 +169,7 @@ def analyze(
             topic=options.topic,
             progress=advance,
             max_chunk_bytes=chunk_limit(options.memory_budget_bytes),
+            temperature_topic=options.temperature_topic,
         )
     series = condition(rec, gaps=options.gaps)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -175,6 +175,7 @@ def analyze_low_memory(
                 columns,
                 keep_one_time_base=True,
                 max_chunk_bytes=chunk_limit(options.memory_budget_bytes),
+                temperature_topic=options.temperature_topic,
             )
 
     with progress.stage("compile", 1, "step"):

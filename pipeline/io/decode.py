@@ -347,12 +347,30 @@ def _namespace(topic: str) -> str:
     return topic.rpartition("/")[0]
 
 
-def _sibling_temperature(imu_topic: str, temp_topics: list[str]) -> str | None:
-    """The Temperature topic of the IMU: the first by name in the IMU topic's namespace or
-    below it (``/imu/data`` → ``/imu/temperature``, ``/imu/temp/raw``); None when there is
-    none: a temperature elsewhere (``/battery/temperature``) belongs to another device."""
-    ns = _namespace(imu_topic)
-    own = sorted(t for t in temp_topics if _namespace(t) == ns or (ns and t.startswith(ns + "/")))
+def _frame_id(payload: np.ndarray) -> str:
+    """``header.frame_id`` of a CDR payload (u32 length with its NUL at byte 12, then the
+    bytes); empty when the length does not fit the payload."""
+    size = int(payload[12:16].view("<u4")[0]) if len(payload) >= 16 else 0
+    if not 1 <= size <= len(payload) - 16:
+        return ""
+    return payload[16 : 16 + size - 1].tobytes().decode("utf-8", "replace")
+
+
+def _sibling_temperature(
+    imu_topic: str, temp_topics: list[str], frame_ids: dict[str, str]
+) -> str | None:
+    """The Temperature topic of the IMU, the first by name of those in the IMU topic's
+    namespace or below it (``/imu/data`` → ``/imu/temperature``) or sharing its non-empty
+    ``frame_id``; None when there is none: a temperature elsewhere (``/battery/temperature``,
+    frame ``battery``) belongs to another device."""
+    ns, frame = _namespace(imu_topic), frame_ids.get(imu_topic, "")
+    own = sorted(
+        t
+        for t in temp_topics
+        if _namespace(t) == ns
+        or (ns and t.startswith(ns + "/"))
+        or (frame and frame_ids.get(t) == frame)
+    )
     return own[0] if own else None
 
 
@@ -483,6 +501,7 @@ def decode(
     columns: frozenset[str] | None = None,
     keep_one_time_base: bool = False,
     max_chunk_bytes: int = MAX_CHUNK_BYTES,
+    temperature_topic: str | None = None,
 ) -> ImuRecording:
     """Decode the IMU channel of an MCAP file or rosbag2 directory (contract: module docstring).
 
@@ -494,6 +513,8 @@ def decode(
     case the stamps are unset or broken — one int64 column less at the peak.
     ``max_chunk_bytes``: chunks declaring more uncompressed bytes are skipped unread
     (:func:`imupipe.io.mcap_scan.chunk_limit` of the memory budget).
+    ``temperature_topic``: the Temperature topic to use for an Imu topic (default: the one in
+    its namespace or with its frame_id, :func:`_sibling_temperature`).
 
     Raises:
         InputError: not a file, not MCAP, no IMU topic, ambiguous or unknown ``topic``.
@@ -526,6 +547,7 @@ def decode(
         "temperature": (_decode_temperature_run, 8, 16),
     }
     malformed: dict[str, int] = defaultdict(int)
+    frame_ids: dict[str, str] = {}  # the header.frame_id of each topic's first message
     for file in files:
         offset = done
         scanner = McapScanner(
@@ -543,6 +565,7 @@ def decode(
                 malformed[channel.topic] += int(np.count_nonzero(~ok))
                 run = MessageRun(run.channel_id, run.log_time[ok], run.payloads[ok])
             if len(run.log_time):
+                frame_ids.setdefault(channel.topic, _frame_id(run.payloads[0]))
                 decoder(
                     MessageRun(run.channel_id, run.log_time.astype(np.int64), run.payloads),
                     channels[channel.topic],
@@ -585,7 +608,14 @@ def decode(
     if columns is None or "t_s" in columns:
         use_log = _uses_log_time(channels[topic].steps, warnings)
         if use_log and "log_time_ns" not in cols:  # counted, not kept: read again, keeping it
-            return decode(path, topic, progress, columns, max_chunk_bytes=max_chunk_bytes)
+            return decode(
+                path,
+                topic,
+                progress,
+                columns,
+                max_chunk_bytes=max_chunk_bytes,
+                temperature_topic=temperature_topic,
+            )
         keep_stamps = columns is None or not columns.isdisjoint({"stamp_ns", "temp_c"})
         t_s = _seconds(cols, use_log, keep_stamps)
         time_source = "log_time" if use_log else "header.stamp"
@@ -608,9 +638,13 @@ def decode(
         frames = _adis_frame(cols, device, n, columns)
         source = SCHEMA_NAME
     else:
-        temp_topic = _sibling_temperature(
-            topic, [t for t, k in topic_kind.items() if k == "temperature" and t in channels]
-        )
+        temp_topics = [t for t, k in topic_kind.items() if k == "temperature" and t in channels]
+        if temperature_topic is not None and temperature_topic not in temp_topics:
+            raise InputError(
+                f"{path}: --temperature-topic {temperature_topic!r} is not a Temperature topic "
+                f"with messages (Temperature topics: {', '.join(sorted(temp_topics)) or 'none'})"
+            )
+        temp_topic = temperature_topic or _sibling_temperature(topic, temp_topics, frame_ids)
         temp = channels[temp_topic].concat() if temp_topic else None
         frames = _imu_frame(cols, temp, n, columns)
         device_meta = {}

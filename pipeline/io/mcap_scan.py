@@ -66,9 +66,16 @@ MAX_CHUNK_BYTES = 2_000_000_000 // CHUNKS_IN_BUDGET
 the default 2 GB budget of ``analyze``.  Writers use ~1 MB (rosbag2 768 KiB, ours ~1 s)."""
 
 
+MIN_CHUNK_LIMIT = 64 << 20
+"""A chunk of this size is always read, however small the budget: writers make ~1 MB chunks
+(rosbag2 768 KiB, the mcap library 1 MiB), and a tiny budget asks for the low-memory path,
+not for refusing the data."""
+
+
 def chunk_limit(memory_budget_bytes: int) -> int:
-    """Largest uncompressed chunk (bytes) the scan inflates under a memory budget."""
-    return max(memory_budget_bytes // CHUNKS_IN_BUDGET, 1 << 20)
+    """Largest uncompressed chunk (bytes) the scan inflates under a memory budget: 1/16 of it,
+    at least :data:`MIN_CHUNK_LIMIT`."""
+    return max(memory_budget_bytes // CHUNKS_IN_BUDGET, MIN_CHUNK_LIMIT)
 
 
 _MALFORMED = (McapError, UnicodeDecodeError, struct.error, ValueError, OverflowError)
