@@ -22,13 +22,23 @@ from imupipe.errors import ImupipeError
 from imupipe.progress import StageProgress
 from imupipe.recording.recorder import RecordSummary, parse_duration, write_truth
 from imupipe.recording.recorder import record as _run_recorder
+from imupipe.report.staging import staged_output
 
 _ANALYZE_OPTIONS = frozenset(f.name for f in fields(AnalyzeOptions))
 
 
 def default_out_dir(path: str | Path) -> Path:
-    """Where ``analyze`` writes when no ``out`` is given: ``FILE.imupipe`` beside the input."""
-    return Path(path).with_suffix(".imupipe")
+    """Where ``analyze`` writes when no ``out`` is given, beside the input: ``run.mcap`` →
+    ``run.imupipe``; any other name gets ``.imupipe`` appended whole, so that two inputs never
+    share an output (bag folders ``calib.day1`` → ``calib.day1.imupipe``); ``.`` is the
+    current folder's name."""
+    path = Path(path)
+    if path.name in ("", ".."):  # "." or "..": the folder's own name
+        path = path.resolve()
+    if not path.name:
+        raise ImupipeError(f"{path} has no name to derive an output folder from; give --out")
+    stem = path.stem if path.suffix == ".mcap" else path.name
+    return path.with_name(stem + ".imupipe")
 
 
 def analyze(
@@ -42,7 +52,8 @@ def analyze(
 
     Args:
         path: the recording.
-        out: output folder (default :func:`default_out_dir`).
+        out: output folder (default :func:`default_out_dir`), replaced as a whole when the
+            analysis has written everything (:func:`imupipe.report.staging.staged_output`).
         progress: show progress bars on a terminal.
         **options: fields of :class:`imupipe.analysis.analyze.AnalyzeOptions` (``topic``,
             ``taus_per_decade``, ``gaps``, ``loop``, ``rrd``, ``figures``,
@@ -69,10 +80,10 @@ def analyze(
             options[name] = Path(options[name])
     analyze_options = AnalyzeOptions(**options)
     sheet = None if analyze_options.datasheet is None else load_datasheet(analyze_options.datasheet)
-    outputs = ReportOutputs(
-        out_dir, figures=analyze_options.figures, rrd_full=analyze_options.rrd_full, datasheet=sheet
-    )
-    with StageProgress(quiet=not progress) as bars:
+    with StageProgress(quiet=not progress) as bars, staged_output(out_dir) as staging:
+        outputs = ReportOutputs(
+            staging, analyze_options.figures, analyze_options.rrd_full, datasheet=sheet
+        )
         return _run_analysis(Path(path), analyze_options, bars, outputs)
 
 
@@ -116,6 +127,8 @@ def record(
     from imupipe.device.adis16364 import config_for_rate
 
     seconds = parse_duration(str(duration))
+    if truth is not None and Path(truth).is_dir():
+        raise ImupipeError(f"--truth {truth} is a folder; give the JSON file to write")
     config = config_for_rate(rate_hz, source=source, serial_number=serial)
     if source == "sim":
         from imupipe.recording.scenario import load_scenario

@@ -6,8 +6,11 @@ line on stderr and exit code 2.  Set ``IMUPIPE_DEBUG=1`` to see tracebacks of in
 
 from __future__ import annotations
 
+import hashlib
+import math
 import os
 import signal
+import string
 import sys
 from dataclasses import asdict, dataclass, replace
 from enum import StrEnum
@@ -17,6 +20,7 @@ from typing import Annotated
 import typer
 
 from imupipe.errors import ImupipeError
+from imupipe.escape import printable
 from imupipe.report.exports import FORMATS, ExportOptions, check_options, write_exports
 
 app = typer.Typer(
@@ -67,13 +71,52 @@ ALL_TOPICS = "all"
 """``--topic all``: analyse every IMU topic, each into its own subfolder."""
 
 
+_FOLDER_SAFE = frozenset(string.ascii_letters + string.digits + "_-")
+_FOLDER_MAX = 200
+"""Longest folder name :func:`topic_folder` makes (most file systems allow 255 bytes)."""
+
+
+def _quote(part: str) -> str:
+    """``part`` with every character outside [A-Za-z0-9_-] as %XX of its UTF-8 bytes."""
+    return "".join(
+        c if c in _FOLDER_SAFE else "".join(f"%{b:02X}" for b in c.encode("utf-8", "surrogatepass"))
+        for c in part
+    )
+
+
 def topic_folder(topic: str) -> str:
-    """Subfolder name for a topic's reports: ``/imu0/data_raw`` → ``imu0_data_raw``."""
-    return topic.strip("/").replace("/", "_") or "root"
+    """Subfolder name of a topic's reports under ``--topic all``: ``/imu0/data_raw`` →
+    ``imu0.data_raw``.
+
+    The name is one path component that can never be ``.``, ``..`` or empty, so the reports
+    stay inside ``--out``; and it is injective, so two topics never share a folder: the leading
+    ``/`` is dropped and the others become ``.`` (when a level is empty, every ``/`` is ``%2F``),
+    every other character outside [A-Za-z0-9_-] is ``%XX`` (``.``, ``%``, a NUL...), a topic
+    without the leading ``/`` starts with ``%%``, and a name longer than :data:`_FOLDER_MAX`
+    ends in ``~`` and 16 hex digits of the topic's SHA-256 (``~`` appears in no other name).
+    """
+    relative = not topic.startswith("/")
+    parts = (topic if relative else topic[1:]).split("/")
+    if "" in parts:  # "/", "//a", "/a/": a level is empty, so every "/" is quoted
+        name = ("" if relative else "%2F") + "%2F".join(_quote(p) for p in parts)
+    else:
+        name = ".".join(_quote(p) for p in parts)
+    name = ("%%" if relative else "") + name
+    if len(name) > _FOLDER_MAX:
+        digest = hashlib.sha256(topic.encode("utf-8", "surrogatepass")).hexdigest()[:16]
+        name = f"{name[: _FOLDER_MAX - 17]}~{digest}"
+    return name
 
 
 def _warn(message: str) -> None:
-    typer.echo(f"warning: {message}", err=True)
+    typer.echo(f"warning: {printable(message)}", err=True)
+
+
+def _say(text: str) -> None:
+    """Print ``text`` line by line, each with its control characters escaped (strings from the
+    input never reach the terminal raw: :func:`imupipe.escape.printable`)."""
+    for line in text.split("\n"):
+        typer.echo(printable(line))
 
 
 @app.command()
@@ -147,7 +190,7 @@ def record(
         view_port=view_port,
     )
     if not quiet:
-        typer.echo(
+        _say(
             f"{summary.path}: {summary.frames} frames, {summary.duration_s:.1f} s at "
             f"{summary.rate_hz:g} Hz ({summary.rate_method}), "
             f"{summary.path.stat().st_size / 1e6:.1f} MB"
@@ -164,7 +207,7 @@ def info(path: Annotated[Path, typer.Argument(help="MCAP file or rosbag2 directo
     from imupipe.io.info import describe
 
     for line in describe(path).lines():
-        typer.echo(line)
+        _say(printable(line))
 
 
 @app.command()
@@ -226,6 +269,13 @@ def analyze(
     export_rate: Annotated[
         float | None, typer.Option(help="Filter/driver rate, Hz, for the exports.")
     ] = None,
+    temperature_topic: Annotated[
+        str | None,
+        typer.Option(
+            help="sensor_msgs/msg/Temperature topic of the IMU (default: the one in the IMU "
+            "topic's namespace or with its frame_id; none otherwise)."
+        ),
+    ] = None,
     quiet: Quiet = False,
 ) -> None:
     """Analyse a recording: Allan deviation, IEEE 952 terms, effects; write reports."""
@@ -233,6 +283,10 @@ def analyze(
     from imupipe.api import default_out_dir
     from imupipe.report.datasheet import load_datasheet
 
+    if not math.isfinite(memory_budget_gb):
+        raise ImupipeError(
+            f"--memory-budget-gb must be a finite number of GB, got {memory_budget_gb}"
+        )
     out_dir = out if out is not None else default_out_dir(path)
     if datasheet is not None:
         load_datasheet(datasheet)  # a bad file fails now, not after the analysis
@@ -250,6 +304,7 @@ def analyze(
         memory_budget_bytes=round(memory_budget_gb * 1e9),
         tmp_dir=tmp_dir,
         datasheet=datasheet,
+        temperature_topic=temperature_topic,
     )
     if topic != ALL_TOPICS:
         _analyze_one(path, out_dir, options, quiet, exporting)
@@ -261,7 +316,7 @@ def analyze(
     for name in topics:
         sub = out_dir / topic_folder(name)
         if not quiet:
-            typer.echo(f"== {name} -> {sub}/")
+            _say(printable(f"== {name} -> {sub}/"))
         try:
             _analyze_one(path, sub, replace(options, topic=name), quiet, exporting)
         except ImupipeError as exc:
@@ -304,10 +359,10 @@ def _analyze_one(
         _warn(w)
     if not quiet:
         sheet = load_datasheet(options.datasheet) if options.datasheet else None
-        typer.echo(format_table(result, sheet))
+        _say(format_table(result, sheet))
         for p in written:
-            typer.echo(f"export: {p}")
-        typer.echo(f"reports written to {out_dir}/")
+            _say(printable(f"export: {p}"))
+        _say(printable(f"reports written to {out_dir}/"))
 
 
 @app.command("export")
@@ -388,17 +443,43 @@ def demo(
     )
 
 
+class _Stopped(BaseException):
+    """SIGINT, SIGTERM or SIGHUP arrived: unwinds like Ctrl-C (a staged output is removed), but
+    past typer, which turns a KeyboardInterrupt into a silent exit 130."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _stop(signum: int, frame: object) -> None:
+    raise _Stopped(signum)
+
+
 def main() -> None:
-    """Console entry point: one-line errors, exit 2 for bad input."""
+    """Console entry point: one-line errors, exit 2 for bad input; SIGINT, SIGTERM and SIGHUP
+    end a command with one line and 128 + the signal (``record`` finishes its file first)."""
+    previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    try:
+        _run()
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _run() -> None:
     try:
         code = app(standalone_mode=False)  # typer.Exit(n) comes back as n here
+    except _Stopped as stop:
+        name = signal.Signals(stop.signum).name
+        said = "interrupted" if stop.signum == signal.SIGINT else f"stopped by {name}"
+        typer.echo(f"imupipe: {said}", err=True)
+        sys.exit(128 + stop.signum)
     except ImupipeError as exc:
-        typer.echo(f"imupipe: error: {exc}", err=True)
+        typer.echo(f"imupipe: error: {printable(str(exc))}", err=True)
         sys.exit(2)
-    except KeyboardInterrupt:
-        typer.echo("imupipe: interrupted", err=True)
-        sys.exit(130)
     except typer.Abort:
+        typer.echo("imupipe: interrupted", err=True)
         sys.exit(130)
     except Exception as exc:  # usage errors (typer's click) and anything unexpected: one line
         if hasattr(exc, "show") and hasattr(exc, "exit_code"):  # click.ClickException
@@ -406,7 +487,8 @@ def main() -> None:
             sys.exit(exc.exit_code)
         if os.environ.get("IMUPIPE_DEBUG"):
             raise
-        typer.echo(f"imupipe: internal error: {type(exc).__name__}: {exc}", err=True)
+        message = printable(f"{type(exc).__name__}: {exc}")
+        typer.echo(f"imupipe: internal error: {message}", err=True)
         sys.exit(1)
     sys.exit(code if isinstance(code, int) else 0)
 

@@ -48,3 +48,7 @@ class DatasheetError(ImupipeError):
 
 class ExportError(ImupipeError):
     """A result folder or option an export cannot use."""
+
+
+class OutputError(ImupipeError):
+    """``--out`` cannot receive an analysis (a file, a dangling link, a foreign folder...)."""

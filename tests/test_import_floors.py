@@ -25,6 +25,7 @@ FLOORS = {
     "vocab": 0,
     "units": 0,
     "progress": 0,
+    "escape": 0,
     "schemas": 0,
     "device": 1,
     "io": 2,

@@ -36,7 +36,7 @@ def wait_for_first_chunk(out: Path, timeout_s: float = 30.0) -> float:
     raise AssertionError(f"{out} never grew past its header")
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_sigint_sigterm_finish_a_valid_file(tmp_path: Path, signum: int) -> None:
     out = tmp_path / "f.mcap"
     proc = start_recorder(out, "--duration", "1h", "--realtime")

@@ -25,8 +25,9 @@ from imupipe.analysis.condition import (
     ConditionedSeries,
     GapPolicy,
     condition,
-    is_stuck,
+    no_axis_error,
     stuck_warning,
+    unanalysable,
 )
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.errors import TooFewFramesError
@@ -62,6 +63,7 @@ class AnalyzeOptions:
     memory_budget_bytes: int = MEMORY_BUDGET_BYTES
     tmp_dir: Path | None = None
     datasheet: Path | None = None  # TOML of the part's noise specs (imupipe.report.datasheet)
+    temperature_topic: str | None = None
 
 
 class Outputs(Protocol):
@@ -182,6 +184,7 @@ def input_summary(
         source=rec.source,
         time_source=rec.time_source,
         counts=series.counts,
+        temperature_topic=rec.temperature_topic,
     )
 
 
@@ -190,7 +193,7 @@ def analyze_axes(
     series: ConditionedSeries,
     options: AnalyzeOptions,
     progress: StageProgress,
-) -> tuple[dict[str, AxisResult], list[str]]:
+) -> tuple[dict[str, AxisResult], dict[str, str]]:
     """Stages 3–4 (+ loop) on the chosen segment (or, policy ``"mask"``, the whole recording
     on its sample grid), one axis at a time; returns the results of the analysed axes and the
     axes found stuck (constant: nothing to analyse)."""
@@ -201,13 +204,14 @@ def analyze_axes(
         aux[name] = aux_block_means(None if x is None else series.on_grid(x), tau0)
     m = tau_factors(series.samples, per_decade=options.taus_per_decade)
     results: dict[str, AxisResult] = {}
-    stuck: list[str] = []
+    stuck: dict[str, str] = {}
     with progress.stage("analyse", len(AXES), "axes") as advance:
         for i, name in enumerate(AXES):
             y = source.column(name, rows)
             assert y is not None  # axes are never null
-            if is_stuck(y):
-                stuck.append(name)
+            why = unanalysable(y)
+            if why is not None:
+                stuck[name] = why
             else:
                 y = series.on_grid(y)
                 curve = allan_curves([y], tau0, m, excluded=series.excluded)[0]
@@ -231,7 +235,12 @@ def analyze(
     the same numbers; the report's warnings say so.
     """
     with open_columns(
-        Path(path), options.topic, progress, options.memory_budget_bytes, options.tmp_dir
+        Path(path),
+        options.topic,
+        progress,
+        options.memory_budget_bytes,
+        options.tmp_dir,
+        options.temperature_topic,
     ) as source:
         if source.spilled:
             with progress.stage("compile", 1, "step"):
@@ -245,12 +254,14 @@ def analyze(
         del rec  # the spilled source's conditioning columns (t_s: 691 MB at 24 h / 1 kHz)
         try:
             results, stuck = analyze_axes(source, series, options, progress)
+            if not results:
+                raise no_axis_error(about, [stuck_warning(a, w) for a, w in stuck.items()])
         except BaseException:
             outputs.discard()
             raise
         warnings = [
             *series.warnings,
-            *(stuck_warning(a) for a in stuck),
+            *(stuck_warning(a, why) for a, why in stuck.items()),
             *outlier_warnings(results),
             *source.notes(series.segment.frames, options.rrd),
         ]

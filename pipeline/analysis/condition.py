@@ -26,6 +26,7 @@ changed or kept.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -129,13 +130,51 @@ class ConditionedSeries:
         return out
 
 
-def is_stuck(y: np.ndarray) -> bool:
-    """A channel constant over the segment (stuck): it has no noise to analyse."""
-    return bool(y.min() == y.max())
+FLOAT_RANGE = (1e-100, 1e100)
+"""Spread and magnitude an axis may have: the Allan variance squares differences of the phase
+(sums of n values), which leave float64 (1e±308, denormals from 2.2e-308) well outside this."""
+GLITCH_FRACTION = 1e-3
+"""A channel equal to one value but for fewer than this fraction of its samples is treated as
+stuck: its few glitches are no noise a fitted N could describe."""
+_SCAN = 1 << 22
+"""Samples compared at a time (4 MB of booleans, not a record-length temporary)."""
 
 
-def stuck_warning(axis: str) -> str:
-    return f"{axis} is constant over the segment (stuck channel?): it is not analysed"
+def _count(y: np.ndarray, differs: Callable[[int], np.ndarray]) -> int:
+    """How many booleans ``differs(start)`` marks true over ``y``, :data:`_SCAN` at a time."""
+    return sum(int(np.count_nonzero(differs(i))) for i in range(0, len(y), _SCAN))
+
+
+def unanalysable(y: np.ndarray) -> str | None:
+    """Why an axis holds no noise the Allan variance can analyse (None when it can): constant
+    (stuck), beyond :data:`FLOAT_RANGE` (values ×1e200, denormals), constant but for a few
+    glitches (:data:`GLITCH_FRACTION`), or a pattern repeating every 2 samples (a 1-LSB channel
+    alternating 0/1: its Allan variance is exactly 0 at every even m)."""
+    lo, hi = float(y.min()), float(y.max())
+    if lo == hi:
+        return "is constant over the segment (stuck channel?)"
+    if max(-lo, hi) > FLOAT_RANGE[1]:
+        return f"reaches {max(-lo, hi):.3g}, beyond what float64 Allan sums hold (1e100)"
+    if hi - lo < FLOAT_RANGE[0]:
+        return f"varies by only {hi - lo:.3g}, below what float64 Allan sums resolve (1e-100)"
+    usual = float(np.median(y[:3]))
+    others = _count(y, lambda i: y[i : i + _SCAN] != usual)
+    if others < GLITCH_FRACTION * len(y):
+        return f"is constant but for {others} sample(s) (glitches?)"
+    later, earlier = y[2:], y[:-2]
+    if _count(later, lambda i: later[i : i + _SCAN] != earlier[i : i + _SCAN]) == 0:
+        return "repeats every 2 samples (a deterministic alternation, no noise)"
+    return None
+
+
+def stuck_warning(axis: str, reason: str) -> str:
+    return f"{axis} {reason}: it is not analysed"
+
+
+def no_axis_error(rec: ImuRecording, why: list[str]) -> ImupipeError:
+    """The error refusing a recording none of whose axes can be analysed (``why``: one
+    :func:`stuck_warning` per axis)."""
+    return ImupipeError(f"{rec.path}: no axis can be analysed: " + "; ".join(why))
 
 
 _CHUNK = 1 << 22
@@ -151,6 +190,44 @@ def _nominal_rate(rec: ImuRecording, t: np.ndarray) -> float:
     if not step > 0:
         raise ImupipeError(f"{rec.path}: cannot tell the sample rate (no increasing stamps)")
     return 1.0 / step
+
+
+RATE_BLOCK = 256
+"""Stamp steps per block whose median follows the sample rate (a gap or a bad stamp in a block
+does not move its median)."""
+RATE_CHANGE = 0.1
+"""Blocks whose median steps differ by more than this fraction are at different rates."""
+
+
+def _block_median_steps(t: np.ndarray) -> np.ndarray:
+    """Median stamp step of each block of :data:`RATE_BLOCK` steps (the last partial block
+    left out), :data:`_CHUNK` steps at a time (a multiple of the block)."""
+    parts = []
+    for i in range(0, len(t) - 1, _CHUNK):
+        steps = np.diff(t[i : min(i + _CHUNK, len(t) - 1) + 1])
+        k = len(steps) // RATE_BLOCK
+        parts.append(np.median(steps[: k * RATE_BLOCK].reshape(k, RATE_BLOCK), axis=1))
+    return np.concatenate(parts) if parts else np.empty(0)
+
+
+def rate_regimes(t: np.ndarray) -> list[tuple[int, int, float]]:
+    """The parts of a recording at one sample rate: (first row, stop row, median step in s)
+    each, in order; one part unless the block median step (:func:`_block_median_steps`) jumps
+    by more than :data:`RATE_CHANGE` between neighbouring blocks and stays there for at least
+    two blocks (a rate switched from 200 to 100 Hz).  A slow drift of the rate is one part."""
+    medians = _block_median_steps(t)
+    if len(medians) < 4:
+        return [(0, len(t), float(np.median(np.diff(t))) if len(t) > 1 else np.nan)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        jump = np.abs(np.log(medians[1:] / medians[:-1])) > np.log1p(RATE_CHANGE)
+    lasting = jump.copy()
+    lasting[:-1] &= ~jump[1:]  # the next block stays at the new rate (not a one-block spike)
+    lasting[-1] = False
+    blocks = [0, *(np.flatnonzero(lasting) + 1).tolist(), len(medians)]
+    return [
+        (a * RATE_BLOCK, b * RATE_BLOCK if b < len(medians) else len(t), float(np.median(m)))
+        for a, b, m in ((a, b, medians[a:b]) for a, b in itertools.pairwise(blocks))
+    ]
 
 
 def _breaks(
@@ -242,10 +319,21 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "longest") -> ConditionedSeri
     n = df.height
     if n < 2:
         raise ImupipeError(f"{rec.path}: {n} frame(s), too few for any averaging time")
+    warnings = list(rec.warnings)
+    regimes = rate_regimes(df["t_s"].to_numpy())
+    offset = 0
+    if len(regimes) > 1:  # analyse the longest part at one rate, as if the rest were a gap
+        offset, stop, step = max(regimes, key=lambda r: r[1] - r[0])
+        rates = ", ".join(f"{1 / r[2]:.4g} Hz from frame {r[0]}" for r in regimes)
+        warnings.append(
+            f"the sample rate changes {len(regimes) - 1} time(s) ({rates}): analysing the "
+            f"longest part at one rate, frames {offset}..{stop - 1} ({1 / step:.4g} Hz)"
+        )
+        df = df.slice(offset, stop - offset)
+        n = df.height
     t = df["t_s"].to_numpy()
     rate = _nominal_rate(rec, t)
     period = 1.0 / rate
-    warnings = list(rec.warnings)
 
     if "nonfinite" in df.columns:  # a frame decoded without its axes (imupipe.io.columns)
         nonfinite = df["nonfinite"].to_numpy()
@@ -280,7 +368,9 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "longest") -> ConditionedSeri
         padded = np.concatenate(([False], good[a:b], [False]))
         change = np.flatnonzero(padded[1:] != padded[:-1]) + a
         for start, stop in change.reshape(-1, 2).tolist():
-            segments.append(Segment(start, stop, float(t[start]), float(t[stop - 1])))
+            segments.append(
+                Segment(start + offset, stop + offset, float(t[start]), float(t[stop - 1]))
+            )
     if not segments:
         raise ImupipeError(f"{rec.path}: no usable frames (all non-finite or saturated)")
 
@@ -319,7 +409,7 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "longest") -> ConditionedSeri
             f"out of {len(segments)} segments"
         )
 
-    seg_t = t[seg.start : seg.stop]
+    seg_t = t[seg.start - offset : seg.stop - offset]
     tau0 = (seg_t[-1] - seg_t[0]) / (seg.frames - 1) if seg.frames > 1 else period
     if seg.frames > 2:
         jitter = _step_jitter(seg_t) / tau0

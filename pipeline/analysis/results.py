@@ -56,7 +56,8 @@ class AxisResult:
 class InputSummary:
     """What was analysed: file, topic, frame count, rate (Hz), duration (s) of the analysed data,
     the clean segments found (dicts from the condition stage), the warnings raised, the message
-    type, the time base (``header.stamp`` or ``log_time``) and what conditioning counted."""
+    type, the time base (``header.stamp`` or ``log_time``), what conditioning counted and the
+    Temperature topic used as the IMU's temperature (None: none, or the ADIS16364's own)."""
 
     path: str
     topic: str
@@ -68,6 +69,7 @@ class InputSummary:
     source: str = "adis16364"
     time_source: str = "header.stamp"
     counts: dict[str, int] = field(default_factory=dict)
+    temperature_topic: str | None = None
 
 
 @dataclass(frozen=True)

@@ -371,13 +371,21 @@ class DeviceConfig:
 
     @classmethod
     def from_metadata(cls, meta: dict[str, str]) -> DeviceConfig:
-        """Inverse of :meth:`to_metadata` (extra keys ignored)."""
+        """Inverse of :meth:`to_metadata` (extra keys ignored).
+
+        Raises:
+            KeyError: a key is missing.
+            ValueError: a value does not parse, or the output rate is not positive and finite.
+        """
+        rate_hz = float(meta["output_rate_hz"])
+        if not math.isfinite(rate_hz) or rate_hz <= 0:
+            raise ValueError(f"output_rate_hz {meta['output_rate_hz']} is not a positive rate")
         return cls(
             product_id=int(meta["product_id"]),
             serial_number=int(meta["serial_number"]),
             smpl_prd=int(meta["smpl_prd"]),
             sens_avg=int(meta["sens_avg"]),
-            output_rate_hz=float(meta["output_rate_hz"]),
+            output_rate_hz=rate_hz,
             rate_method=meta["rate_method"],
             source=meta["source"],
             frame_id=meta.get("frame_id", "adis16364"),
@@ -422,8 +430,8 @@ def config_for_rate(
     sensor itself; any other rate (100 Hz, the paper's) by a host timer polling the default
     819.2 SPS stream with sample-and-hold.
     """
-    if output_rate_hz <= 0:
-        raise ConfigError(f"output rate must be positive, got {output_rate_hz}")
+    if not math.isfinite(output_rate_hz) or output_rate_hz <= 0:
+        raise ConfigError(f"output rate must be positive and finite, got {output_rate_hz}")
     for ns in range(128):
         if abs(sample_rate_sps(ns) / output_rate_hz - 1) < 1e-4:
             return DeviceConfig(

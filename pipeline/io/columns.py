@@ -26,6 +26,7 @@ import tempfile
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import polars as pl
@@ -33,6 +34,7 @@ from mcap.reader import make_reader
 
 from imupipe.errors import InputError
 from imupipe.io.decode import ImuRecording, ScannedRecording, decode, mcap_files, scan
+from imupipe.io.mcap_scan import chunk_limit
 from imupipe.progress import StageProgress
 from imupipe.vocab import AXES
 
@@ -231,10 +233,13 @@ def open_columns(
     progress: StageProgress,
     budget_bytes: int,
     tmp_dir: Path | None = None,
+    temperature_topic: str | None = None,
 ) -> Iterator[ColumnSource]:
     """The column source for ``path``: in memory if the whole-frame analysis is estimated to
     fit in ``budget_bytes``, else spilled to a temporary directory in ``tmp_dir`` (default:
     the system's temporary directory) that is removed when the block ends, however it ends.
+    Chunks declaring more than :func:`imupipe.io.mcap_scan.chunk_limit` of the budget are
+    skipped unread; ``temperature_topic``: as :func:`imupipe.io.decode.decode`.
 
     Raises:
         InputError: unreadable recording (see :func:`imupipe.io.decode.decode`), or a
@@ -243,13 +248,14 @@ def open_columns(
     files = mcap_files(Path(path))
     size = sum(f.stat().st_size for f in files)
     estimate = peak_estimate(files)
+    limits = {"max_chunk_bytes": chunk_limit(budget_bytes), "temperature_topic": temperature_topic}
     if estimate <= budget_bytes:
         with progress.stage("decode", size, "bytes") as advance:
-            yield InMemoryColumns(decode(path, topic=topic, progress=advance))
+            yield InMemoryColumns(decode(path, topic=topic, progress=advance, **limits))
         return
     with _spill_directory(tmp_dir, estimate // PEAK_BYTES_PER_FRAME) as folder:
         with progress.stage("decode + spill", size, "bytes") as advance:
-            scanned = _spill(path, topic, advance, folder)
+            scanned = _spill(path, topic, advance, folder, **limits)
         yield SpilledColumns(scanned, estimate, budget_bytes)
 
 
@@ -270,12 +276,17 @@ def _spill_directory(tmp_dir: Path | None, frames: int) -> Iterator[Path]:
 
 
 def _spill(
-    path: Path, topic: str | None, progress: Callable[[int], None], folder: Path
+    path: Path,
+    topic: str | None,
+    progress: Callable[[int], None],
+    folder: Path,
+    **limits: Any,
 ) -> ScannedRecording:
-    """Scan ``path`` once, every decode column (and ``nonfinite``) spilled into ``folder``."""
+    """Scan ``path`` once, every decode column (and ``nonfinite``) spilled into ``folder``
+    (``limits``: ``max_chunk_bytes`` and ``temperature_topic`` of :func:`scan`)."""
     columns = frozenset({*CONDITION_COLUMNS, *AXES, *HOUSEKEEPING, "stamp_ns", "diag_stat"})
     try:
-        return scan(path, topic, progress, columns, spill_dir=folder)
+        return scan(path, topic, progress, columns, spill_dir=folder, **limits)
     except OSError as exc:
         if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
             raise

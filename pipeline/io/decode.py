@@ -29,6 +29,8 @@ columns (in memory, or appended to files in a spill directory), and
 
 from __future__ import annotations
 
+import os
+import re
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -42,7 +44,7 @@ from mcap.records import Channel, Schema
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
 from imupipe.errors import InputError
-from imupipe.io.mcap_scan import McapScanner, MessageBatch
+from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, McapScanner, MessageBatch
 from imupipe.io.mcap_walk import gather
 from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
 from imupipe.vocab import AXES
@@ -85,6 +87,7 @@ class ImuRecording:
     device: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     topics: list[str] = field(default_factory=list)
+    temperature_topic: str | None = None
 
 
 _CDR_HEAD = 16
@@ -438,20 +441,35 @@ def _imu_frame(
     return pl.DataFrame({k: makers[k]() for k in wanted})
 
 
-def _sibling_temperature(imu_topic: str, temp_topics: list[str]) -> str | None:
-    """The Temperature topic sharing the longest namespace prefix with the IMU topic."""
-    if not temp_topics:
-        return None
-    imu_parts = imu_topic.strip("/").split("/")
+def _namespace(topic: str) -> str:
+    return topic.rpartition("/")[0]
 
-    def shared(t: str) -> int:
-        parts = t.strip("/").split("/")
-        return next(
-            (i for i, (a, b) in enumerate(zip(parts, imu_parts, strict=False)) if a != b),
-            min(len(parts), len(imu_parts)),
-        )
 
-    return max(temp_topics, key=shared)
+def _frame_id(payload: np.ndarray) -> str:
+    """``header.frame_id`` of a CDR payload (u32 length with its NUL at byte 12, then the
+    bytes); empty when the length does not fit the payload."""
+    size = int(payload[12:16].view("<u4")[0]) if len(payload) >= 16 else 0
+    if not 1 <= size <= len(payload) - 16:
+        return ""
+    return payload[16 : 16 + size - 1].tobytes().decode("utf-8", "replace")
+
+
+def _sibling_temperature(
+    imu_topic: str, temp_topics: list[str], frame_ids: dict[str, str]
+) -> str | None:
+    """The Temperature topic of the IMU, the first by name of those in the IMU topic's
+    namespace or below it (``/imu/data`` → ``/imu/temperature``) or sharing its non-empty
+    ``frame_id``; None when there is none: a temperature elsewhere (``/battery/temperature``,
+    frame ``battery``) belongs to another device."""
+    ns, frame = _namespace(imu_topic), frame_ids.get(imu_topic, "")
+    own = sorted(
+        t
+        for t in temp_topics
+        if _namespace(t) == ns
+        or (ns and t.startswith(ns + "/"))
+        or (frame and frame_ids.get(t) == frame)
+    )
+    return own[0] if own else None
 
 
 def _uses_log_time(steps: dict[str, _Steps], warnings: list[str]) -> bool:
@@ -484,36 +502,94 @@ def _seconds(cols: dict[str, np.ndarray], use_log: bool, keep_stamps: bool) -> n
     return _map_chunks(base, lambda b: (b - first) / 1e9, out)
 
 
-def mcap_files(path: Path) -> list[Path]:
-    """The MCAP files of a recording: the file itself, or a rosbag2 directory's split files.
+def _natural_key(file: Path) -> list[str | int]:
+    """Sort key reading the digit runs of a name as numbers: bag_2 before bag_10."""
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", file.name)]
+
+
+def _listed_files(bag: Path, meta: Path) -> list[str]:
+    """The ``relative_file_paths`` entries of a rosbag2 ``metadata.yaml``, as written."""
+    listed: list[str] = []
+    in_list = False
+    for line in meta.read_text(errors="replace").splitlines():
+        stripped = line.strip()
+        if stripped.startswith("relative_file_paths:"):
+            in_list = True
+        elif in_list and stripped.startswith("- "):
+            listed.append(stripped[2:].strip().strip("'\""))
+        elif in_list and stripped:
+            in_list = False
+    return listed
+
+
+def bag_files(path: Path) -> tuple[list[Path], list[str]]:
+    """The MCAP files of a recording and warnings about them: the file itself, or a rosbag2
+    directory's split files.
 
     A rosbag2 directory lists its files in ``metadata.yaml`` (``relative_file_paths``) in
-    recording order; without one, the directory's ``*.mcap`` files are taken in name order.
+    recording order; a listed file that is missing is warned about.  Without the list (a killed
+    recorder leaves none), the directory's ``*.mcap`` files are taken in natural name order
+    (bag_2 before bag_10).
+
+    Raises:
+        InputError: not a file, empty, a directory without MCAP files, a listed path that
+            leaves the directory (absolute or with ``..``), or a split file that is not a
+            regular file (a FIFO, a folder, a dangling link).
     """
     if path.is_file():
         if path.stat().st_size == 0:
             raise InputError(f"{path}: empty file")
-        return [path]
+        return [path], []
     if not path.is_dir():
         raise InputError(f"{path}: not a file")
-    listed: list[Path] = []
+    warnings: list[str] = []
+    files: list[Path] = []
     meta = path / "metadata.yaml"
     if meta.is_file():
-        in_list = False
-        for line in meta.read_text(errors="replace").splitlines():
-            stripped = line.strip()
-            if stripped.startswith("relative_file_paths:"):
-                in_list = True
-            elif in_list and stripped.startswith("- "):
-                listed.append(path / stripped[2:].strip().strip("'\""))
-            elif in_list and stripped:
-                in_list = False
-    files = [f for f in listed if f.suffix == ".mcap" and f.is_file()]
+        for entry in _listed_files(path, meta):
+            if Path(entry).is_absolute() or ".." in Path(entry).parts:
+                raise InputError(
+                    f"{meta}: lists {entry!r}, outside the bag directory; refusing to read it"
+                )
+            if not entry.endswith(".mcap"):
+                continue
+            if os.path.lexists(path / entry):
+                files.append(path / entry)
+            else:
+                warnings.append(f"{meta.name} lists {entry}, which is missing")
     if not files:
-        files = sorted(path.glob("*.mcap"))
+        files = sorted(path.glob("*.mcap"), key=_natural_key)
     if not files:
         raise InputError(f"{path}: a directory without MCAP files")
-    return files
+    for file in files:
+        if not file.is_file():
+            raise InputError(f"{file}: not a regular file (a FIFO, a folder or a broken link?)")
+    return files, warnings
+
+
+def mcap_files(path: Path) -> list[Path]:
+    """The MCAP files of a recording (:func:`bag_files` without its warnings)."""
+    return bag_files(path)[0]
+
+
+def _same_device(
+    path: Path, seen: dict[str, dict[str, str]], new: dict[str, dict[str, str]], file: Path
+) -> None:
+    """Refuse split files whose ``adis16364`` metadata differ: each file's counts would need
+    its own scale factors (e.g. two gyro ranges), and one factor for all would be wrong.
+
+    Raises:
+        InputError: naming the keys that differ.
+    """
+    before, after = seen.get(METADATA_NAME), new.get(METADATA_NAME)
+    if before is None or after is None or before == after:
+        return
+    keys = sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k))
+    raise InputError(
+        f"{path}: {file.name} carries different '{METADATA_NAME}' metadata than the files "
+        f"before it ({', '.join(keys)}): one scale for all would be wrong; analyse the files "
+        "separately"
+    )
 
 
 @dataclass(frozen=True)
@@ -534,6 +610,7 @@ class ScannedRecording:
     device_meta: dict[str, str]
     warnings: list[str]
     topics: list[str]
+    temperature_topic: str | None = None
 
     @property
     def rows(self) -> int:
@@ -584,6 +661,7 @@ class ScannedRecording:
             device=self.device_meta,
             warnings=warnings,
             topics=self.topics,
+            temperature_topic=self.temperature_topic,
         )
 
 
@@ -593,6 +671,8 @@ def decode(
     progress: Callable[[int], None] | None = None,
     columns: frozenset[str] | None = None,
     keep_one_time_base: bool = False,
+    max_chunk_bytes: int = MAX_CHUNK_BYTES,
+    temperature_topic: str | None = None,
 ) -> ImuRecording:
     """Decode the IMU channel of an MCAP file or rosbag2 directory (contract: module docstring).
 
@@ -601,16 +681,35 @@ def decode(
     contract.  ``keep_one_time_base``: for ``t_s``, keep only the header stamps while reading
     (both bases' monotonicity is counted on the way) and read the file again for the log time
     in the rare case the stamps are unset or broken — one int64 column less at the peak.
+    ``max_chunk_bytes``: chunks declaring more uncompressed bytes are skipped unread
+    (:func:`imupipe.io.mcap_scan.chunk_limit` of the memory budget).
+    ``temperature_topic``: the Temperature topic to use for an Imu topic (default: the one in
+    its namespace or with its frame_id, :func:`_sibling_temperature`).
 
     Raises:
         InputError: not a file, not MCAP, no IMU topic, ambiguous or unknown ``topic``.
     """
-    scanned = scan(path, topic, progress, columns, keep_one_time_base)
+    scanned = scan(
+        path,
+        topic,
+        progress,
+        columns,
+        keep_one_time_base,
+        max_chunk_bytes=max_chunk_bytes,
+        temperature_topic=temperature_topic,
+    )
     rec = scanned.recording(columns)
     if rec is None:  # the log time was counted, not kept: read again, keeping it
         topic = scanned.topic
         del scanned
-        return decode(path, topic, progress, columns)
+        return decode(
+            path,
+            topic,
+            progress,
+            columns,
+            max_chunk_bytes=max_chunk_bytes,
+            temperature_topic=temperature_topic,
+        )
     return rec
 
 
@@ -621,6 +720,8 @@ def scan(
     columns: frozenset[str] | None = None,
     keep_one_time_base: bool = False,
     spill_dir: Path | None = None,
+    max_chunk_bytes: int = MAX_CHUNK_BYTES,
+    temperature_topic: str | None = None,
 ) -> ScannedRecording:
     """Read the recording once into the raw columns that ``columns`` needs (see
     :func:`decode`), in memory, or appended to files in ``spill_dir`` (one sub-directory per
@@ -630,11 +731,19 @@ def scan(
         InputError: as :func:`decode`.
     """
     path = Path(path)
-    files = mcap_files(path)
+    files, file_warnings = bag_files(path)
     kinds = {SCHEMA_NAME: "adis16364", IMU_SCHEMA: "imu", TEMPERATURE_SCHEMA: "temperature"}
 
     def wanted(channel: Channel, schema: Schema | None) -> bool:
-        return schema is not None and schema.name in kinds
+        if schema is None or schema.name not in kinds:
+            return False
+        kind = topic_kind.setdefault(channel.topic, kinds[schema.name])
+        if kind != kinds[schema.name]:  # its messages cannot share one set of columns
+            raise InputError(
+                f"{path}: topic {channel.topic!r} carries two message types "
+                f"({kind} and {kinds[schema.name]}); refusing to mix them"
+            )
+        return True
 
     skip = frozenset({"log_time_ns"} if keep_one_time_base else ())
 
@@ -649,7 +758,7 @@ def scan(
     topic_kind: dict[str, str] = {}
     all_topics: set[str] = set()
     metadata: dict[str, dict[str, str]] = {}
-    warnings: list[str] = []
+    warnings: list[str] = list(file_warnings)
     done = 0
     layouts = {  # kind: (decoder, alignment of the fields after the header, their size in bytes)
         "adis16364": (lambda m, out: _decode_adis(m, out, columns), 4, TAIL_SIZE),
@@ -657,10 +766,14 @@ def scan(
         "temperature": (_decode_temperature, 8, 16),
     }
     malformed: dict[str, int] = defaultdict(int)
+    frame_ids: dict[str, str] = {}  # the header.frame_id of each topic's first message
     for file in files:
         offset = done
         scanner = McapScanner(
-            file, wanted=wanted, progress=progress and (lambda n, o=offset: progress(o + n))
+            file,
+            wanted=wanted,
+            progress=progress and (lambda n, o=offset: progress(o + n)),
+            max_chunk_bytes=max_chunk_bytes,
         )
         report = scanner.report
         for batch in scanner.batches():
@@ -670,8 +783,12 @@ def scan(
             if bad:
                 malformed[channel.topic] += bad
             if len(messages):
+                if channel.topic not in frame_ids:
+                    first = batch.data[batch.offset[0] : batch.offset[0] + batch.size[0]]
+                    frame_ids[channel.topic] = _frame_id(first)
                 decoder(messages, channels[channel.topic])
         done += report.file_bytes
+        _same_device(path, metadata, report.metadata, file)
         metadata.update(report.metadata)
         prefix = f"{file.name}: " if len(files) > 1 else ""
         warnings.extend(prefix + d for d in report.damage())
@@ -706,6 +823,7 @@ def scan(
         columns_of_channel.seal()
     device = None
     device_meta: dict[str, str] = {}
+    temp_topic = None
     if topic_kind[topic] == "adis16364":
         if METADATA_NAME not in metadata:
             raise InputError(
@@ -723,9 +841,13 @@ def scan(
             ) from None
         temperature = None
     else:
-        temp_topic = _sibling_temperature(
-            topic, [t for t, k in topic_kind.items() if k == "temperature" and t in channels]
-        )
+        temp_topics = [t for t, k in topic_kind.items() if k == "temperature" and t in channels]
+        if temperature_topic is not None and temperature_topic not in temp_topics:
+            raise InputError(
+                f"{path}: --temperature-topic {temperature_topic!r} is not a Temperature topic "
+                f"with messages (Temperature topics: {', '.join(sorted(temp_topics)) or 'none'})"
+            )
+        temp_topic = temperature_topic or _sibling_temperature(topic, temp_topics, frame_ids)
         temperature = channels[temp_topic] if temp_topic else None
     return ScannedRecording(
         path=path,
@@ -737,4 +859,5 @@ def scan(
         device_meta=device_meta,
         warnings=warnings,
         topics=imu_topics,
+        temperature_topic=temp_topic,
     )

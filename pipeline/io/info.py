@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from imupipe.device.frame_schema import SCHEMA_NAME
-from imupipe.io.decode import IMU_SCHEMA, mcap_files
+from imupipe.io.decode import IMU_SCHEMA, bag_files
 from imupipe.io.mcap_scan import McapScanner, ScanReport
 
 
@@ -69,10 +69,9 @@ def describe(path: Path) -> RecordingInfo:
         InputError: not a file, empty, a directory without MCAP files, not MCAP.
     """
     path = Path(path)
-    files = mcap_files(path)
+    files, damage = bag_files(path)
     topics: dict[str, TopicInfo] = {}
     metadata: dict[str, dict[str, str]] = {}
-    damage: list[str] = []
     file_bytes = chunks = 0
     for file in files:
         scanner = McapScanner(file)

@@ -14,6 +14,13 @@ Damage is survived and reported, never hidden: a file cut mid-record keeps every
 before the cut (and, when the cut falls inside a chunk, reads that chunk's header to tell what was
 lost); a chunk whose CRC does not match (or that does not decompress) is skipped, with its time
 range; a record whose fields do not parse is skipped and counted.  See :class:`ScanReport`.
+
+Hostile files are refused piece by piece, never followed: a chunk nested inside a chunk (the
+spec forbids it; unpacked, 15 KB of nested chunks became 10 M frames) is counted as a bad record
+and not opened; a chunk whose header declares more than ``max_chunk_bytes`` uncompressed, or
+any record longer than that, is skipped unread (its bytes are never copied) before anything is
+inflated; and no chunk inflates beyond the size its header declares (zstd: the frame's own
+content size must agree and the output is capped; lz4: streamed with a cap).
 """
 
 from __future__ import annotations
@@ -54,6 +61,32 @@ unchunked file): they are indexed by one compiled walk, not parsed one by one.  
 doubles while the messages fill it and falls back to the least when they do not, so a file
 that alternates messages with other records costs no more than reading it."""
 _PARSED = (Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA)
+_IN_CHUNK = (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA)
+"""Records besides messages that a chunk may hold and the scan reads (MCAP spec: a chunk holds
+Schema, Channel and Message records; anything else in it is skipped without a copy)."""
+NESTED_CHUNK = "nested chunk"
+"""The kind under which chunks found inside a chunk are counted in ``bad_records``."""
+CHUNKS_IN_BUDGET = 16
+"""A chunk may take at most 1/16 of the memory budget uncompressed: up to
+``PREFETCH_RECORDS + 1`` chunks are held at once, each compressed and inflated, next to the
+decoded columns."""
+MAX_CHUNK_BYTES = 2_000_000_000 // CHUNKS_IN_BUDGET
+"""Largest uncompressed chunk (bytes) read without a memory budget (``imupipe info``): that of
+the default 2 GB budget of ``analyze``.  Writers use ~1 MB (rosbag2 768 KiB, ours ~1 s)."""
+
+
+MIN_CHUNK_LIMIT = 64 << 20
+"""A chunk of this size is always read, however small the budget: writers make ~1 MB chunks
+(rosbag2 768 KiB, the mcap library 1 MiB), and a tiny budget asks for the low-memory path,
+not for refusing the data."""
+
+
+def chunk_limit(memory_budget_bytes: int) -> int:
+    """Largest uncompressed chunk (bytes) the scan inflates under a memory budget: 1/16 of it,
+    at least :data:`MIN_CHUNK_LIMIT`."""
+    return max(memory_budget_bytes // CHUNKS_IN_BUDGET, MIN_CHUNK_LIMIT)
+
+
 _MALFORMED = (McapError, UnicodeDecodeError, struct.error, ValueError, OverflowError)
 """What the mcap library's record parsers raise on bytes that are not a valid record."""
 
@@ -161,10 +194,17 @@ class ScanReport:
     """Message records read in chunks (all channels) and their total size: the mean record size
     converts a lost chunk's uncompressed size into an estimated message count."""
 
+    max_chunk_bytes: int = MAX_CHUNK_BYTES
+    """Chunks declaring more uncompressed bytes were skipped unread: their size is not trusted."""
+
     def lost_messages_estimate(self, chunk: LostChunk) -> int | None:
         """Messages a lost chunk held ≈ its uncompressed size / the mean message record size
-        seen in the readable chunks (exact for a chunk of equal-size messages only)."""
+        seen in the readable chunks (exact for a chunk of equal-size messages only); None when
+        unknown, also when its header claims more than a chunk may hold (a header's claim of
+        1 TB is no count of anything)."""
         if chunk.uncompressed_bytes is None or self.message_records == 0:
+            return None
+        if chunk.uncompressed_bytes > self.max_chunk_bytes:
             return None
         mean_record = self.message_record_bytes / self.message_records
         return round(chunk.uncompressed_bytes / mean_record)
@@ -206,14 +246,29 @@ class ScanReport:
 
 
 def _decompress(chunk: Chunk) -> bytes:
-    if chunk.compression == "zstd":
-        return zstandard.ZstdDecompressor().decompress(
-            chunk.data, max_output_size=chunk.uncompressed_size
-        )
-    if chunk.compression == "lz4":
-        return lz4.frame.decompress(chunk.data)
+    """The chunk's records, inflated to at most the ``uncompressed_size`` its header declares
+    (a bomb cannot grow past the size checked against the budget before this is called).
+
+    Raises:
+        ValueError: the data would inflate beyond the declared size, or is cut short.
+        InputError: a compression the MCAP spec does not name.
+    """
+    size = chunk.uncompressed_size
     if chunk.compression == "":
         return chunk.data
+    if size == 0:  # no records; 0 would also mean "no limit" to zstandard
+        return b""
+    if chunk.compression == "zstd":
+        framed = zstandard.frame_content_size(chunk.data)  # -1: not in the frame header
+        if framed not in (-1, size):  # zstandard allocates the frame's size, not the cap
+            raise ValueError(f"its zstd frame declares {framed} bytes, its header {size}")
+        return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=size)
+    if chunk.compression == "lz4":
+        inflater = lz4.frame.LZ4FrameDecompressor()
+        data = inflater.decompress(chunk.data, max_length=size)
+        if not inflater.eof:
+            raise ValueError(f"it does not end within the {size} bytes its header declares")
+        return data
     raise InputError(f"unsupported compression {chunk.compression!r}")
 
 
@@ -252,7 +307,8 @@ def _unpack(body: bytes) -> tuple[Chunk, np.ndarray, str, MessageIndex | None]:
     try:
         data = _decompress(chunk)
     except Exception as exc:  # each codec raises its own error types
-        return chunk, np.empty(0, np.uint8), f"decompression failed: {exc}", None
+        reason = f"decompression failed: {str(exc) or type(exc).__name__}"
+        return chunk, np.empty(0, np.uint8), reason, None
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
         return chunk, np.empty(0, np.uint8), "CRC mismatch", None
     buf = np.frombuffer(data, np.uint8)
@@ -272,6 +328,8 @@ class McapScanner:
         wanted: called with (channel, schema or None) when a channel is first seen; messages of
             channels for which it returns False are skipped without copying.
         progress: called with the number of bytes consumed so far.
+        max_chunk_bytes: a chunk declaring more uncompressed bytes, or any record longer than
+            this, is skipped unread (:func:`chunk_limit` of the memory budget).
     """
 
     def __init__(
@@ -279,9 +337,12 @@ class McapScanner:
         path: Path,
         wanted: Callable[[Channel, Schema | None], bool] = lambda c, s: True,
         progress: Callable[[int], None] | None = None,
+        max_chunk_bytes: int = MAX_CHUNK_BYTES,
     ) -> None:
         self.path = Path(path)
-        self.report = ScanReport(file_bytes=os.path.getsize(self.path))
+        self.report = ScanReport(
+            file_bytes=os.path.getsize(self.path), max_chunk_bytes=max_chunk_bytes
+        )
         self._wanted = wanted
         self._wanted_ids = np.zeros(1 << 16, bool)  # by channel id (u16)
         self._progress = progress or (lambda n: None)
@@ -320,7 +381,11 @@ class McapScanner:
         :class:`_Block` for consecutive Message records); fills the report's truncation, footer
         and bytes-read fields."""
         report = self.report
-        with open(self.path, "rb") as f:
+        try:
+            f = open(self.path, "rb")  # closed by the with below
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot be read ({exc.strerror or exc})") from None
+        with f:
             if f.read(len(MAGIC)) != MAGIC:
                 raise NotMcapError(f"{self.path} is not an MCAP file (bad magic)")
             pos = len(MAGIC)
@@ -345,9 +410,17 @@ class McapScanner:
                     f.seek(pos)
                     self._progress(pos)
                     continue
-                if opcode in _PARSED:
+                if opcode == Opcode.CHUNK and length >= _CHUNK_FIXED:
+                    head = f.read(_CHUNK_FIXED)
+                    if self._too_large(head, length):
+                        f.seek(length - _CHUNK_FIXED, os.SEEK_CUR)
+                    else:
+                        yield opcode, head + f.read(length - _CHUNK_FIXED), length
+                elif opcode in _PARSED and length <= report.max_chunk_bytes:
                     yield opcode, f.read(length), length
                 else:
+                    if opcode in _PARSED:  # a record no budget can hold: counted, not read
+                        self._bad_record(opcode)
                     f.seek(length, os.SEEK_CUR)
                 pos += RECORD_HEAD + length
                 self._progress(pos)
@@ -377,6 +450,29 @@ class McapScanner:
             return None
         return _Block(buf, index)
 
+    def _too_large(self, head: bytes, length: int) -> bool:
+        """Whether a chunk (its fixed fields ``head``, record ``length``) is over the limit; such
+        a chunk is reported lost with the size it claims, and never read or inflated."""
+        start, end, size = struct.unpack("<QQQ", head)
+        limit = self.report.max_chunk_bytes
+        if max(size, length) <= limit:
+            return False
+        self.report.chunks += 1
+        self.report.bad_chunks.append(
+            LostChunk(
+                start,
+                end,
+                size,
+                f"it declares {size} bytes uncompressed ({length} stored), more than the "
+                f"{limit} a chunk may take under the memory budget; skipped unread",
+            )
+        )
+        return True
+
+    def _bad_record(self, opcode: int) -> None:
+        kind = _opcode_name(opcode)
+        self.report.bad_records[kind] = self.report.bad_records.get(kind, 0) + 1
+
     def _cut_chunk(self, head: bytes) -> None:
         """Record what a chunk cut by the end of the file held, from its fixed header fields."""
         if len(head) < _CHUNK_FIXED:
@@ -393,8 +489,7 @@ class McapScanner:
         try:
             yield from self._parsed_record(opcode, body, length)
         except _MALFORMED:
-            kind = _opcode_name(opcode)
-            self.report.bad_records[kind] = self.report.bad_records.get(kind, 0) + 1
+            self._bad_record(opcode)
 
     def _parsed_record(
         self, opcode: int, body: bytes | _Block | Future, length: int
@@ -483,7 +578,11 @@ class McapScanner:
                     )
                 )
                 return
-            yield from self._record(
-                opcode, buf[pos + RECORD_HEAD : pos + size].tobytes(), size - RECORD_HEAD
-            )
+            if opcode in _IN_CHUNK:
+                yield from self._record(
+                    opcode, buf[pos + RECORD_HEAD : pos + size].tobytes(), size - RECORD_HEAD
+                )
+            elif opcode == Opcode.CHUNK:  # forbidden by the spec: never unpacked
+                bad = self.report.bad_records
+                bad[NESTED_CHUNK] = bad.get(NESTED_CHUNK, 0) + 1
             index = index_messages(buf, pos + size)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import json
+import math
 import signal
 import time
 from collections.abc import Callable, Iterator
@@ -77,20 +78,26 @@ def parse_duration(text: str) -> float:
             value = float(text)
     except ValueError:
         raise ImupipeError(f"cannot read duration {text!r} (use e.g. 12h, 30m, 90s)") from None
-    if value <= 0:
-        raise ImupipeError(f"duration must be positive, got {text!r}")
+    if not math.isfinite(value) or value <= 0:
+        raise ImupipeError(f"duration must be a positive, finite length, got {text!r}")
     return value
+
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""Signals after which the recorder finishes the current chunk, the summary and the footer."""
 
 
 @contextlib.contextmanager
 def _stop_on_signals() -> Iterator[Callable[[], int | None]]:
-    """Turn SIGINT/SIGTERM into a signal number the recording loop polls between chunks."""
+    """Turn SIGINT/SIGTERM/SIGHUP into a signal number the recording loop polls between chunks
+    (SIGHUP: the terminal closed or the SSH session dropped; the file is finished as for the
+    others)."""
     stop: dict[str, int | None] = {"signum": None}
 
     def handler(signum, frame):
         stop["signum"] = signum
 
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS}
     try:
         yield lambda: stop["signum"]
     finally:
@@ -197,5 +204,12 @@ def record(
 
 
 def write_truth(path: Path, truth: dict) -> None:
-    """Write the simulator's ground truth (parameters and effects) as JSON."""
-    Path(path).write_text(json.dumps(truth, indent=2, sort_keys=True) + "\n")
+    """Write the simulator's ground truth (parameters and effects) as JSON.
+
+    Raises:
+        ImupipeError: the file cannot be written.
+    """
+    try:
+        Path(path).write_text(json.dumps(truth, indent=2, sort_keys=True) + "\n")
+    except OSError as exc:
+        raise ImupipeError(f"cannot write the truth file {path}: {exc.strerror or exc}") from None

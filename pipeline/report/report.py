@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from imupipe.analysis.results import (
     report_json,
 )
 from imupipe.device.frame_schema import SCHEMA_NAME as ADIS16364_SOURCE
+from imupipe.escape import printable
 from imupipe.report.datasheet import Datasheet, adis16364
 from imupipe.report.exports import render as render_export
 from imupipe.report.exports import write_exports
@@ -142,6 +144,29 @@ def _text_table(header: tuple[str, ...], rows: Iterable[tuple[str, ...]]) -> str
     )
 
 
+_MD_SPECIAL = re.compile(r"([\\`*_\[\]<>#!~&])")
+"""ASCII punctuation with a meaning inside a line in CommonMark/GFM (code, emphasis, links,
+images, HTML, entities, strikethrough; ``#`` closes a heading).  Input strings never start a
+line here, so list and heading markers need no escape, and ``|`` is escaped by
+:func:`_md_table`, the only place a pipe means something."""
+
+
+def _md(text: str) -> str:
+    """A string from the input (path, topic, metadata, a warning naming them) as literal
+    Markdown text: control characters escaped (:func:`imupipe.escape.printable`: one line, so it
+    cannot start a heading or a table), Markdown punctuation backslash-escaped (CommonMark 2.4),
+    so that no emphasis, link, image or HTML tag comes from the input."""
+    return _MD_SPECIAL.sub(r"\\\1", printable(text))
+
+
+def _fence(text: str, info: str) -> list[str]:
+    """A fenced code block whose fence is longer than any backtick run in ``text``
+    (CommonMark 4.5), so the text cannot close it."""
+    longest = max((len(run) for run in re.findall("`+", text)), default=0)
+    fence = "`" * max(3, longest + 1)
+    return [fence + info, text, fence]
+
+
 def _md_table(header: tuple[str, ...], rows: Iterable[tuple[str, ...]]) -> str:
     def line(cells: tuple[str, ...]) -> str:
         return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
@@ -154,15 +179,16 @@ def format_table(result: AnalysisResult, datasheet: Datasheet | None = None) -> 
     (``datasheet``: default :func:`default_datasheet`)."""
     inp = result.input
     head = (
-        f"{inp.path} [{inp.topic}]: {inp.frames} frames, {inp.rate_hz:.4g} Hz, "
-        f"{inp.duration_s / 3600:.3g} h analysed; final model (after the closed loop)"
+        f"{printable(inp.path)} [{printable(inp.topic)}]: {inp.frames} frames, "
+        f"{inp.rate_hz:.4g} Hz, {inp.duration_s / 3600:.3g} h analysed; final model (after the "
+        "closed loop)"
     )
     parts = [head, _text_table(*paper_rows(result, datasheet or default_datasheet(result)))]
     loop_rows = _loop_rows(result)
     if loop_rows:
         parts.append(f"closed loop (error = {ERROR_MEASURE}):")
         parts.append(_text_table(_LOOP_HEADER, loop_rows))
-    parts += [f"warning: {w}" for w in inp.warnings]
+    parts += [f"warning: {printable(w)}" for w in inp.warnings]
     return "\n".join(parts)
 
 
@@ -180,7 +206,7 @@ def report_markdown(
     inp = result.input
     datasheet = datasheet or default_datasheet(result)
     md = [
-        f"# imupipe report: `{Path(inp.path).name}`",
+        f"# imupipe report: {_md(Path(inp.path).name)}",
         "",
         "## Input",
         "",
@@ -188,8 +214,8 @@ def report_markdown(
             ("path", "topic", "source", "frames", "rate", "duration"),
             [
                 (
-                    f"`{inp.path}`",
-                    f"`{inp.topic}`",
+                    _md(inp.path),
+                    _md(inp.topic),
                     inp.source,
                     str(inp.frames),
                     f"{inp.rate_hz:.6g} Hz",
@@ -200,11 +226,11 @@ def report_markdown(
         "",
     ]
     if result.device:
-        md += ["Device: " + ", ".join(f"{k} = {v}" for k, v in result.device.items()), ""]
+        md += ["Device: " + ", ".join(f"{_md(k)} = {_md(v)}" for k, v in result.device.items()), ""]
     if inp.segments:
         md += [f"Segments: {len(inp.segments)}", ""]
         md += [f"- {json.dumps(jsonable(s))}" for s in inp.segments] + [""]
-    md += ["### Warnings", ""] + ([f"- {w}" for w in inp.warnings] or ["- none"]) + [""]
+    md += ["### Warnings", ""] + ([f"- {_md(w)}" for w in inp.warnings] or ["- none"]) + [""]
     md += [
         "## Noise terms (final model)",
         "",
@@ -244,7 +270,7 @@ def report_markdown(
         md += _loop_details(result)
     md += ["## Figures", ""]
     md += [f"![{name}]({path.name})" for name, path in figures.items()] + [""]
-    md += ["## Kalibr `imu.yaml`", "", "```yaml", kalibr_yaml(result).rstrip(), "```", ""]
+    md += ["## Kalibr `imu.yaml`", "", *_fence(kalibr_yaml(result).rstrip(), "yaml"), ""]
     return "\n".join(md)
 
 
