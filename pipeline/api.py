@@ -1,5 +1,5 @@
-"""The Python API: :func:`analyze` and :func:`record`, what ``imupipe analyze`` and
-``imupipe record`` run.  The command line (:mod:`imupipe.cli`) only parses options and calls
+"""The Python API: :func:`analyze`, :func:`analyze_fleet` and :func:`record`, what ``imupipe
+analyze``, ``imupipe fleet`` and ``imupipe record`` run.  The command line (:mod:`imupipe.cli`) only parses options and calls
 these.
 
     >>> import imupipe
@@ -11,19 +11,20 @@ these.
 from __future__ import annotations
 
 import math
-from dataclasses import fields
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from imupipe.analysis.analyze import AnalyzeOptions
 from imupipe.analysis.analyze import analyze as _run_analysis
+from imupipe.analysis.analyze import analyze_options
 from imupipe.analysis.results import AnalysisResult
 from imupipe.errors import ImupipeError
 from imupipe.progress import StageProgress
 from imupipe.record.recorder import RecordSummary, parse_duration, write_truth
 from imupipe.record.recorder import record as _run_recorder
 
-_ANALYZE_OPTIONS = frozenset(f.name for f in fields(AnalyzeOptions))
+if TYPE_CHECKING:
+    from imupipe.fleet.run import FleetResult
 
 
 def default_out_dir(path: str | Path) -> Path:
@@ -55,13 +56,51 @@ def analyze(
     Raises:
         ImupipeError: bad input or options, stated in one sentence.
     """
-    unknown = sorted(set(options) - _ANALYZE_OPTIONS)
-    if unknown:
-        known = sorted(_ANALYZE_OPTIONS)
-        raise ImupipeError(f"unknown analyze option(s) {unknown}; known: {known}")
+    opts = analyze_options(**options)
     out_dir = Path(out) if out is not None else default_out_dir(path)
     with StageProgress(quiet=not progress) as bars:
-        return _run_analysis(Path(path), out_dir, AnalyzeOptions(**options), bars)
+        return _run_analysis(Path(path), out_dir, opts, bars)
+
+
+def analyze_fleet(
+    recordings: Sequence[str | Path],
+    out: str | Path,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    datasheet: str | Path | None = None,
+    progress: bool = False,
+    **options: Any,
+) -> FleetResult:
+    """Analyse many recordings on a Dask cluster and write the fleet report into ``out``.
+
+    Args:
+        recordings: MCAP files, rosbag2 directories, folders or globs holding them, fsspec
+            URLs (``s3://bucket/prefix/``), read by the workers where they are.
+        out: the fleet's folder: ``fleet.json``, ``fleet.parquet``, ``fleet.md``, ``fleet.rrd``
+            and one folder per unit holding what :func:`analyze` writes.
+        scheduler: an existing Dask scheduler (default ``DASK_SCHEDULER_ADDRESS``, else a
+            LocalCluster of ``workers`` processes, one per core by default).
+        datasheet: a datasheet TOML to check the units against.
+        **options: as :func:`analyze`, applied to every unit.
+
+    Returns:
+        The :class:`imupipe.fleet.run.FleetResult`; failed recordings are in ``.failed``.
+
+    Raises:
+        ImupipeError: no recordings, a bad datasheet or option, an unreachable scheduler.
+    """
+    from imupipe.fleet.run import run_fleet
+
+    return run_fleet(
+        recordings,
+        out,
+        scheduler=scheduler,
+        workers=workers,
+        datasheet=datasheet,
+        options=analyze_options(**options),
+        progress=progress,
+    )
 
 
 def record(

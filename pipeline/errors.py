@@ -36,3 +36,11 @@ class DeviceError(ImupipeError):
 
 class ViewerError(ImupipeError):
     """No Rerun recording to show, or no Rerun viewer to show it with."""
+
+
+class DatasheetError(ImupipeError):
+    """A datasheet TOML file that cannot be read or names unknown terms or units."""
+
+
+class FleetError(ImupipeError):
+    """A fleet that cannot start (no recordings found, no scheduler) or whose units failed."""

@@ -9,7 +9,7 @@ output is the next one's input; nothing else is shared.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
@@ -18,7 +18,7 @@ import polars as pl
 
 from imupipe.analysis.condition import ConditionedSeries, condition
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
-from imupipe.errors import TooFewFramesError
+from imupipe.errors import ImupipeError, TooFewFramesError
 from imupipe.io.decode import ImuRecording, decode, mcap_files
 from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
@@ -47,6 +47,19 @@ class AnalyzeOptions:
     rrd: bool = True
     figures: bool = True
     memory_budget_bytes: int = MEMORY_BUDGET_BYTES
+
+
+def analyze_options(**options: object) -> AnalyzeOptions:
+    """:class:`AnalyzeOptions` from keyword arguments, naming any unknown one.
+
+    Raises:
+        ImupipeError: an option that is not a field of :class:`AnalyzeOptions`.
+    """
+    known = {f.name for f in fields(AnalyzeOptions)}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ImupipeError(f"unknown analyze option(s) {unknown}; known: {sorted(known)}")
+    return AnalyzeOptions(**options)
 
 
 def housekeeping(frames: pl.DataFrame, name: str) -> np.ndarray | None:
