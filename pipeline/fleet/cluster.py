@@ -29,7 +29,8 @@ def fleet_client(scheduler: str | None = None, workers: int | None = None) -> It
 
     Without an address: a ``LocalCluster`` of ``workers`` processes (default one per core), one
     thread each (the analysis' numba kernels are single-threaded and the GIL is held in parts
-    of it), bound to 127.0.0.1, no dashboard, stopped on exit.  With an address: a client of that
+    of it), every server bound to 127.0.0.1 (the scheduler's HTTP routes on a free port rather
+    than 8787), stopped on exit.  With an address: a client of that
     scheduler; ``workers`` then means "wait until that many workers have joined".
 
     Raises:
@@ -46,7 +47,7 @@ def fleet_client(scheduler: str | None = None, workers: int | None = None) -> It
                 threads_per_worker=1,
                 processes=True,
                 host="127.0.0.1",
-                dashboard_address=None,
+                dashboard_address="127.0.0.1:0",
                 silence_logs=logging.ERROR,
             ) as cluster,
             Client(cluster) as client,
