@@ -1,6 +1,6 @@
 """The Python API: :func:`analyze`, :func:`analyze_fleet` and :func:`record`, what ``imupipe
-analyze``, ``imupipe fleet`` and ``imupipe record`` run.  The command line (:mod:`imupipe.cli`) only parses options and calls
-these.
+analyze``, ``imupipe fleet`` and ``imupipe record`` run.  The command line (:mod:`imupipe.cli`)
+only parses options and calls these.
 
     >>> import imupipe
     >>> result = imupipe.analyze("run.mcap", out="run.imupipe", rrd=False)

@@ -17,7 +17,6 @@ import numpy as np
 import polars as pl
 import pytest
 
-from imupipe.analysis.analyze import AnalyzeOptions
 from imupipe.api import analyze, record
 from imupipe.fleet.curves import UNIT_COLUMN
 from imupipe.fleet.run import run_fleet
@@ -95,9 +94,7 @@ def test_local_cluster_local_and_s3_units(tmp_path, s3_server):
     # fleet.json: the population median of N is the median of the units' final N
     doc = json.loads((out / "fleet.json").read_text())
     assert (doc["recordings"], doc["analysed"], doc["failed"]) == (2, 2, 0)
-    row = next(
-        p for p in doc["population"] if p["axis"] == "gyro_x" and p["term"] == "random_walk"
-    )
+    row = next(p for p in doc["population"] if p["axis"] == "gyro_x" and p["term"] == "random_walk")
     values = [
         u.report["axes"]["gyro_x"].get("ieee952_after", u.report["axes"]["gyro_x"]["ieee952"])[
             "random_walk"
@@ -146,11 +143,19 @@ def test_existing_scheduler_survives_a_killed_worker(tmp_path):
         _wait_for(sched_file.exists, 60, "the scheduler file")
         workers = [
             subprocess.Popen(
-                [BIN / "dask", "worker", "--scheduler-file", sched_file, "--nthreads", "1",
-                 "--no-nanny", *local],
+                [
+                    BIN / "dask",
+                    "worker",
+                    "--scheduler-file",
+                    sched_file,
+                    "--nthreads",
+                    "1",
+                    "--no-nanny",
+                    *local,
+                ],
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
-            )  # fmt: skip
+            )
             for _ in range(2)
         ]
         procs += workers
@@ -200,9 +205,7 @@ def test_existing_scheduler_survives_a_killed_worker(tmp_path):
     assert [units[f"unit{k}"]["status"] for k in range(4)] == ["ok"] * 4
     # the killed worker's task ran again on the surviving worker: it did all the good units
     survivor_pid = pids[survivor]
-    assert {units[f"unit{k}"]["worker"].rsplit(":", 1)[1] for k in range(4)} == {
-        str(survivor_pid)
-    }
+    assert {units[f"unit{k}"]["worker"].rsplit(":", 1)[1] for k in range(4)} == {str(survivor_pid)}
     for k, path in enumerate(good):
         ref = analyze(path, tmp_path / f"ref{k}", loop=False, rrd=False)
         got = json.loads((tmp_path / "out" / f"unit{k}" / "report.json").read_text())

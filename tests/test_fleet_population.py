@@ -61,11 +61,11 @@ def _units(values, rel=0.05):
 def test_outlier_is_a_unit_whose_interval_misses_the_others_tolerance_interval():
     rng = np.random.default_rng(1)
     values = list(1e-3 * np.exp(rng.normal(0, 0.05, 12)))
-    units = _units(values) + [UnitTerm("hot", 2e-3, 1.9e-3, 2.1e-3)]
+    units = [*_units(values), UnitTerm("hot", 2e-3, 1.9e-3, 2.1e-3)]
     stats = term_stats("gyro_x", "random_walk", "rad/s/sqrt(Hz)", units)
     assert stats.outliers == ("hot",)
     # the same estimate with a wide interval (a short recording) is not called an outlier
-    wide = _units(values) + [UnitTerm("hot", 2e-3, 0.8e-3, 4e-3)]
+    wide = [*_units(values), UnitTerm("hot", 2e-3, 0.8e-3, 4e-3)]
     assert term_stats("gyro_x", "random_walk", "rad/s/sqrt(Hz)", wide).outliers == ()
     assert stats.resolved == 13 and stats.units == 13
     assert stats.median == pytest.approx(float(np.median([*values, 2e-3])))
@@ -92,9 +92,8 @@ def test_datasheet_pass_fail(tmp_path):
     limit = 2.0 * RAD_PER_DEG / 60.0
     assert sheet.get("gyro", "random_walk").si == pytest.approx(limit)
     # median below the typical value: pass; one unit's whole interval above it: failing unit
-    units = _units([0.5 * limit, 0.6 * limit, 0.7 * limit]) + [
-        UnitTerm("bad", 1.5 * limit, 1.2 * limit, 1.8 * limit)
-    ]
+    bad = UnitTerm("bad", 1.5 * limit, 1.2 * limit, 1.8 * limit)
+    units = [*_units([0.5 * limit, 0.6 * limit, 0.7 * limit]), bad]
     st = term_stats("gyro_x", "random_walk", "u", units, sheet.get("gyro", "random_walk"))
     assert st.population_pass is True
     assert st.failing_units == ("bad",)
@@ -132,7 +131,8 @@ def test_population_uses_terms_after_the_loop():
         final = {**term, "value": after, "lo": after, "hi": after}
         terms = {t: term for t in ("quantization", "random_walk", "bias_instability",
                                    "rate_random_walk", "rate_ramp")}  # fmt: skip
-        return {"axes": {"gyro_x": {"ieee952": terms, "ieee952_after": {**terms, "random_walk": final}}}}
+        after = {**terms, "random_walk": final}
+        return {"axes": {"gyro_x": {"ieee952": terms, "ieee952_after": after}}}
 
     stats = population({"a": doc(1.0, 3.0), "b": doc(1.0, 5.0)})
     rw = next(s for s in stats if s.term == "random_walk")
@@ -181,8 +181,9 @@ def test_population_curve_is_the_median_and_band_of_the_units():
     def curve(scale):
         n = len(tau)
         return pl.DataFrame(
-            {"axis": ["gyro_x"] * n, "unit": ["rad/s"] * n, "tau": tau, "adev": scale / np.sqrt(tau),
-             "lo": np.nan, "hi": np.nan, "edf": 1.0, "terms": 1, "alpha": 0.0,
+            {"axis": ["gyro_x"] * n, "unit": ["rad/s"] * n, "tau": tau,
+             "adev": scale / np.sqrt(tau), "lo": np.nan, "hi": np.nan, "edf": 1.0,
+             "terms": 1, "alpha": 0.0,
              "adev_after": np.nan, "model_before": np.nan, "model_after": np.nan,
              "z_before": np.nan, "z_after": np.nan},
             schema=ALLAN_SCHEMA,
