@@ -9,6 +9,7 @@ import numpy as np
 import polars as pl
 import pytest
 
+from imupipe.analysis.analyze import AnalyzeOptions
 from imupipe.analysis.results import ALLAN_SCHEMA
 from imupipe.errors import DatasheetError, FleetError
 from imupipe.fleet.curves import fleet_frame, population_curves
@@ -25,6 +26,7 @@ from imupipe.fleet.population import (
     tolerance_interval,
 )
 from imupipe.fleet.report import md_text
+from imupipe.fleet.task import budget_for_worker
 from imupipe.units import RAD_PER_DEG
 
 
@@ -197,3 +199,10 @@ def test_population_curve_is_the_median_and_band_of_the_units():
     assert at10["units"][0] == 3
     # 2.5th/97.5th percentiles of log10 values (0, log 2, log 4) -> close to the extremes
     assert at10["lo"][0] == pytest.approx(10 ** (0.05 * math.log10(2)) / math.sqrt(10.0))
+
+
+def test_worker_memory_caps_the_analysis_budget():
+    options = AnalyzeOptions(memory_budget_bytes=2_000_000_000)
+    assert budget_for_worker(options, None) == options
+    assert budget_for_worker(options, 10_000_000_000).memory_budget_bytes == 2_000_000_000
+    assert budget_for_worker(options, 1_000_000_000).memory_budget_bytes == 600_000_000

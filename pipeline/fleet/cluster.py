@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import os
 from collections.abc import Iterator
 
 import dask.config
+from dask.system import CPU_COUNT
 from distributed import Client, LocalCluster
 
 from imupipe.errors import FleetError
@@ -27,7 +27,8 @@ def scheduler_address(scheduler: str | None) -> str | None:
 def fleet_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Client]:
     """A Dask client for the fleet.
 
-    Without an address: a ``LocalCluster`` of ``workers`` processes (default one per core), one
+    Without an address: a ``LocalCluster`` of ``workers`` processes (default one per core the
+    process may use: ``dask.system.CPU_COUNT`` honours CPU affinity and cgroup quotas), one
     thread each (the analysis' numba kernels are single-threaded and the GIL is held in parts
     of it), every server bound to 127.0.0.1 (the scheduler's HTTP routes on a free port rather
     than 8787), stopped on exit.  With an address: a client of that
@@ -40,7 +41,7 @@ def fleet_client(scheduler: str | None = None, workers: int | None = None) -> It
         raise FleetError(f"--workers must be at least 1, not {workers}")
     address = scheduler_address(scheduler)
     if address is None:
-        n = workers or os.cpu_count() or 1
+        n = workers or CPU_COUNT
         with (
             LocalCluster(
                 n_workers=n,
