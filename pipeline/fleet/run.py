@@ -5,7 +5,7 @@ only then is the cluster started (:mod:`imupipe.fleet.cluster`), so bad argument
 any worker starts.  Each recording is one task (:func:`imupipe.fleet.task.analyze_unit`);
 results are collected as they complete (``distributed.as_completed``), counting recordings on
 the progress bar.  A worker that dies mid-task is replaced by Dask rescheduling its task on
-another worker; a task that kills ``distributed.scheduler.allowed-failures`` + 1 workers (3 by
+another worker; a task that kills ``distributed.scheduler.allowed-failures`` + 1 workers (4 by
 default) is reported as that unit's failure.
 """
 
