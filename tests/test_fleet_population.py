@@ -199,6 +199,10 @@ def test_population_curve_is_the_median_and_band_of_the_units():
     assert at10["units"][0] == 3
     # 2.5th/97.5th percentiles of log10 values (0, log 2, log 4) -> close to the extremes
     assert at10["lo"][0] == pytest.approx(10 ** (0.05 * math.log10(2)) / math.sqrt(10.0))
+    # a τ that only one of three units reaches is not the population's
+    longer = curve(1.0).with_columns(pl.col("tau") * 10)
+    pop = population_curves(fleet_frame({"a": longer, "b": curve(2.0), "c": curve(4.0)}))
+    assert pop["tau"].max() == pytest.approx(100.0)
 
 
 def test_worker_memory_caps_the_analysis_budget():

@@ -5,6 +5,8 @@ deviation at each τ.
 Units of different lengths or rates have different τ grids, so each unit's curve is
 interpolated linearly in (log τ, log σ) — where a power-law noise is a straight line — onto a
 common grid of :data:`GRID_PER_DECADE` τ per decade, inside its own measured τ range only.
+The population curve is given where at least half of the units have a value (the longest τ of
+a few long recordings is not the population's).
 """
 
 from __future__ import annotations
@@ -71,7 +73,7 @@ def population_curves(fleet: pl.DataFrame) -> pl.DataFrame:
             rows.append(y)
         logs = np.vstack(rows)
         count = np.isfinite(logs).sum(axis=0)
-        keep = count > 0
+        keep = 2 * count >= len(rows)
         logs = logs[:, keep]
         with np.errstate(all="ignore"):
             median = 10 ** np.nanmedian(logs, axis=0)

@@ -104,11 +104,14 @@ def terms_figure(
         ax.set_yscale("log")
         ax.set_title(f"{symbol} [{unit}]")
         ax.grid(True, axis="y", which="major", lw=0.4, alpha=0.6)
+    shown = [by_key[(a, t)] for a in axes for t, _ in STRIP_TERMS if (a, t) in by_key]
     panels[0].errorbar([], [], yerr=[], fmt="o", color="k", label="unit, 95 % interval")
-    panels[0].errorbar([], [], yerr=[], fmt="o", color="tab:orange", label="outlier unit")
+    if any(st.outliers for st in shown):
+        panels[0].errorbar([], [], yerr=[], fmt="o", color="tab:orange", label="outlier unit")
     panels[0].plot([], [], "v", color="0.5", label="unresolved: upper bound")
     panels[0].fill_between([], [], [], color="tab:blue", alpha=0.15, label="95 %/95 % tolerance")
-    panels[0].plot([], [], "--", color="tab:red", label="datasheet")
+    if any(st.datasheet is not None for st in shown):
+        panels[0].plot([], [], "--", color="tab:red", label="datasheet")
     panels[0].legend(fontsize=7)
     fig.suptitle(f"{_TITLES[sensor]}: noise terms of {len(names)} units")
     fig.tight_layout()

@@ -146,7 +146,7 @@ def population_rows(stats: list[TermStats]) -> list[tuple[str, ...]]:
         ti = "—"
         if s.tolerance is not None:
             ti = f"[{_in(s.tolerance[0], unit)}, {_in(s.tolerance[1], unit)}]"
-        spread = "—" if s.robust_spread is None else f"{100 * s.robust_spread:.0f} %"
+        spread = "—" if s.robust_spread is None else f"{100 * s.robust_spread:.2g} %"
         rows.append(
             (
                 s.axis,
