@@ -210,3 +210,20 @@ def test_worker_memory_caps_the_analysis_budget():
     assert budget_for_worker(options, None) == options
     assert budget_for_worker(options, 10_000_000_000).memory_budget_bytes == 2_000_000_000
     assert budget_for_worker(options, 1_000_000_000).memory_budget_bytes == 600_000_000
+
+
+def test_bad_arguments_fail_before_any_worker_starts(tmp_path, monkeypatch):
+    from imupipe.fleet import run
+
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("the cluster must not start")
+
+    monkeypatch.setattr(run, "fleet_client", no_cluster)
+    rec = tmp_path / "a.mcap"
+    rec.write_bytes(b"x")
+    sheet = tmp_path / "sheet.toml"
+    sheet.write_text("[gyro]\nrandom_walk = { value = 1.0, unit = 'furlong' }\n")
+    with pytest.raises(DatasheetError, match="unknown unit"):
+        run.run_fleet([rec], tmp_path / "out", datasheet=sheet)
+    with pytest.raises(FleetError, match="no recording"):
+        run.run_fleet([tmp_path / "nothing_here"], tmp_path / "out")
