@@ -8,6 +8,10 @@ script writes it as ``sensor_msgs/msg/Imu`` (rad/s, m/s²) with rosbags' own ros
     python benchmarks/adis16405_bag.py ../shared/reference/adis16405 /tmp/adis16405_bag
     imupipe analyze /tmp/adis16405_bag --out /tmp/adis16405.imupipe
 
+The reference holds two units; a third argument picks one (``imu1``, the default, or ``imu2``):
+
+    python benchmarks/adis16405_bag.py ../shared/reference/adis16405 /tmp/adis16405_imu2 imu2
+
 The README's "Measured data" section reports what that analysis found.
 """
 
@@ -26,14 +30,17 @@ T0_NS = 1_500_000_000_000_000_000
 
 
 def main() -> None:
-    if len(sys.argv) != 3:
-        sys.exit("usage: adis16405_bag.py REFERENCE_DIR OUTPUT_BAG_DIR")
+    if len(sys.argv) not in (3, 4):
+        sys.exit("usage: adis16405_bag.py REFERENCE_DIR OUTPUT_BAG_DIR [imu1|imu2]")
     ref_dir, out = Path(sys.argv[1]), Path(sys.argv[2])
-    data = np.load(ref_dir / "adis16405_imu1_lsb.npz")
+    unit = sys.argv[3] if len(sys.argv) == 4 else "imu1"
+    data = np.load(ref_dir / f"adis16405_{unit}_lsb.npz")
     values = data["counts"].astype(np.float64) * data["lsb"]
     gyro = values[:, :3] * RAD_PER_DEG
     accel = values[:, 3:] * STANDARD_GRAVITY
-    step = round(1e9 / float(data["rate_hz"]))
+    # imu2's file stores no rate; the reference README gives 100 Hz for both units
+    rate_hz = float(data["rate_hz"]) if "rate_hz" in data.files else 100.0
+    step = round(1e9 / rate_hz)
     ts = get_typestore(Stores.ROS2_HUMBLE)
     imu_t, header_t, time_t = (
         ts.types[n]

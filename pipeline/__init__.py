@@ -13,17 +13,26 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
-__all__ = ["AnalysisResult", "ImupipeError", "RecordSummary", "__version__", "analyze", "record"]
+__all__ = [
+    "AnalysisResult",
+    "ImupipeError",
+    "RecordSummary",
+    "__version__",
+    "analyze",
+    "analyze_fleet",
+    "record",
+]
 
 if TYPE_CHECKING:
     from imupipe.analysis.results import AnalysisResult
-    from imupipe.api import analyze, record
+    from imupipe.api import analyze, analyze_fleet, record
     from imupipe.errors import ImupipeError
     from imupipe.recording.recorder import RecordSummary
 
 _LAZY = {
     "analyze": "imupipe.api",
     "record": "imupipe.api",
+    "analyze_fleet": "imupipe.api",
     "AnalysisResult": "imupipe.analysis.results",
     "RecordSummary": "imupipe.recording.recorder",
     "ImupipeError": "imupipe.errors",

@@ -1,6 +1,6 @@
-"""The Python API: :func:`analyze` and :func:`record`, what ``imupipe analyze`` and
-``imupipe record`` run.  The command line (:mod:`imupipe.cli`) only parses options and calls
-these.
+"""The Python API: :func:`analyze`, :func:`analyze_fleet` and :func:`record`, what ``imupipe
+analyze``, ``imupipe fleet`` and ``imupipe record`` run.  The command line (:mod:`imupipe.cli`)
+only parses options and calls these.
 
     >>> import imupipe
     >>> result = imupipe.analyze("run.mcap", out="run.imupipe", rrd=False)
@@ -11,12 +11,12 @@ these.
 from __future__ import annotations
 
 import math
-from dataclasses import fields
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from imupipe.analysis.analyze import AnalyzeOptions
 from imupipe.analysis.analyze import analyze as _run_analysis
+from imupipe.analysis.analyze import analyze_options
 from imupipe.analysis.results import AnalysisResult
 from imupipe.errors import ImupipeError
 from imupipe.progress import StageProgress
@@ -24,7 +24,8 @@ from imupipe.recording.recorder import RecordSummary, parse_duration, write_trut
 from imupipe.recording.recorder import record as _run_recorder
 from imupipe.report.staging import staged_output
 
-_ANALYZE_OPTIONS = frozenset(f.name for f in fields(AnalyzeOptions))
+if TYPE_CHECKING:
+    from imupipe.fleet.run import FleetResult
 
 
 def default_out_dir(path: str | Path) -> Path:
@@ -67,10 +68,6 @@ def analyze(
     Raises:
         ImupipeError: bad input or options, stated in one sentence.
     """
-    unknown = sorted(set(options) - _ANALYZE_OPTIONS)
-    if unknown:
-        known = sorted(_ANALYZE_OPTIONS)
-        raise ImupipeError(f"unknown analyze option(s) {unknown}; known: {known}")
     from imupipe.report.datasheet import load_datasheet
     from imupipe.report.outputs import ReportOutputs
 
@@ -78,13 +75,52 @@ def analyze(
     for name in ("tmp_dir", "datasheet"):
         if options.get(name) is not None:
             options[name] = Path(options[name])
-    analyze_options = AnalyzeOptions(**options)
-    sheet = None if analyze_options.datasheet is None else load_datasheet(analyze_options.datasheet)
+    opts = analyze_options(**options)
+    sheet = None if opts.datasheet is None else load_datasheet(opts.datasheet)
     with StageProgress(quiet=not progress) as bars, staged_output(out_dir) as staging:
-        outputs = ReportOutputs(
-            staging, analyze_options.figures, analyze_options.rrd_full, datasheet=sheet
-        )
-        return _run_analysis(Path(path), analyze_options, bars, outputs)
+        outputs = ReportOutputs(staging, opts.figures, opts.rrd_full, datasheet=sheet)
+        return _run_analysis(Path(path), opts, bars, outputs)
+
+
+def analyze_fleet(
+    recordings: Sequence[str | Path],
+    out: str | Path,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    datasheet: str | Path | None = None,
+    progress: bool = False,
+    **options: Any,
+) -> FleetResult:
+    """Analyse many recordings on a Dask cluster and write the fleet report into ``out``.
+
+    Args:
+        recordings: MCAP files, rosbag2 directories, folders or globs holding them, fsspec
+            URLs (``s3://bucket/prefix/``), read by the workers where they are.
+        out: the fleet's folder: ``fleet.json``, ``fleet.parquet``, ``fleet.md``, ``fleet.rrd``
+            and one folder per unit holding what :func:`analyze` writes.
+        scheduler: an existing Dask scheduler (default ``DASK_SCHEDULER_ADDRESS``, else a
+            LocalCluster of ``workers`` processes, one per core by default).
+        datasheet: a datasheet TOML to check the units against.
+        **options: as :func:`analyze`, applied to every unit.
+
+    Returns:
+        The :class:`imupipe.fleet.run.FleetResult`; failed recordings are in ``.failed``.
+
+    Raises:
+        ImupipeError: no recordings, a bad datasheet or option, an unreachable scheduler.
+    """
+    from imupipe.fleet.run import run_fleet
+
+    return run_fleet(
+        recordings,
+        out,
+        scheduler=scheduler,
+        workers=workers,
+        datasheet=datasheet,
+        options=analyze_options(**options),
+        progress=progress,
+    )
 
 
 def record(

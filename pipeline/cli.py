@@ -1,4 +1,4 @@
-"""The ``imupipe`` command line: record, info, analyze, export, view, demo.
+"""The ``imupipe`` command line: record, info, analyze, export, fleet, view, demo.
 
 Bad input never produces a traceback: every :class:`~imupipe.errors.ImupipeError` becomes one
 line on stderr and exit code 2.  Set ``IMUPIPE_DEBUG=1`` to see tracebacks of internal errors.
@@ -386,6 +386,87 @@ def export_cmd(
     options = ExportOptions(combine.value, inflate, rate)
     for path in export_result_dir(result_dir, [f.value for f in format], out, options):
         typer.echo(f"{path}")
+
+
+@app.command()
+def fleet(
+    recordings: Annotated[
+        list[str],
+        typer.Argument(
+            help="MCAP files, rosbag2 directories, folders or globs holding them, or fsspec "
+            "URLs (s3://bucket/prefix/), read by the workers where they are."
+        ),
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Folder for the fleet report.")],
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            envvar="DASK_SCHEDULER_ADDRESS",
+            help="Existing Dask scheduler (tcp://host:8786); default: a local cluster started "
+            "and stopped by this command.",
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="Local cluster: worker processes (default: one per core). With --scheduler: "
+            "wait until that many workers have joined.",
+        ),
+    ] = None,
+    datasheet: Annotated[
+        Path | None, typer.Option(help="Datasheet TOML to check every unit and the lot against.")
+    ] = None,
+    taus_per_decade: Annotated[int, typer.Option(min=4, max=100)] = 10,
+    gaps: Annotated[GapPolicy, typer.Option(help="As imupipe analyze.")] = GapPolicy.longest,
+    rrd: Annotated[bool, typer.Option(help="Write each unit's recording.rrd and fleet.rrd.")] = (
+        True
+    ),
+    loop: Annotated[bool, typer.Option(help="Run the closed-loop effect search.")] = True,
+    memory_budget_gb: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            help="As imupipe analyze; capped at 60 % of each worker's memory limit.",
+        ),
+    ] = 2.0,
+    quiet: Quiet = False,
+) -> None:
+    """Analyse many recordings on a Dask cluster; write each unit's reports and the fleet's
+    (fleet.json, fleet.parquet, fleet.md, fleet.rrd).  Exits 2 if any recording failed."""
+    from imupipe.analysis.analyze import AnalyzeOptions
+    from imupipe.errors import FleetError
+    from imupipe.fleet.run import run_fleet
+
+    options = AnalyzeOptions(
+        taus_per_decade=taus_per_decade,
+        gaps=gaps.value,
+        loop=loop,
+        rrd=rrd,
+        memory_budget_bytes=round(memory_budget_gb * 1e9),
+    )
+    result = run_fleet(
+        recordings,
+        out,
+        scheduler=scheduler,
+        workers=workers,
+        datasheet=datasheet,
+        options=options,
+        progress=not quiet,
+    )
+    for unit in result.failed:
+        _warn(f"{unit.name}: {unit.error}")
+    if not quiet:
+        ok = len(result.units) - len(result.failed)
+        typer.echo(
+            f"{ok} of {len(result.units)} recordings analysed in {result.seconds:.1f} s; "
+            f"fleet report in {result.out_dir}/fleet.md"
+        )
+    if result.failed:
+        raise FleetError(
+            f"{len(result.failed)} of {len(result.units)} recordings failed "
+            f"(listed in {result.out_dir}/fleet.md)"
+        )
 
 
 @app.command()

@@ -52,3 +52,7 @@ class ExportError(ImupipeError):
 
 class OutputError(ImupipeError):
     """``--out`` cannot receive an analysis (a file, a dangling link, a foreign folder...)."""
+
+
+class FleetError(ImupipeError):
+    """A fleet that cannot start (no recordings found, no scheduler) or whose units failed."""

@@ -28,7 +28,15 @@ def test_import_name_is_imupipe_not_pipeline(tmp_path: Path) -> None:
     ).stdout.split(maxsplit=1)
     assert out[0] == "True"
     assert out[1].strip() == str(
-        ["AnalysisResult", "ImupipeError", "RecordSummary", "__version__", "analyze", "record"]
+        [
+            "AnalysisResult",
+            "ImupipeError",
+            "RecordSummary",
+            "__version__",
+            "analyze",
+            "analyze_fleet",
+            "record",
+        ]
     )
 
 

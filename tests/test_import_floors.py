@@ -35,6 +35,7 @@ FLOORS = {
     "analysis": 4,
     "report": 5,
     "testing": 5.5,
+    "fleet": 5.7,
     "api": 6,
     "cli": 6,
     "__main__": 6,

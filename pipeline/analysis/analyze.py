@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Protocol
 
@@ -30,7 +30,7 @@ from imupipe.analysis.condition import (
     unanalysable,
 )
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
-from imupipe.errors import TooFewFramesError
+from imupipe.errors import ImupipeError, TooFewFramesError
 from imupipe.io.columns import HOUSEKEEPING, ColumnSource, open_columns
 from imupipe.io.decode import ImuRecording
 from imupipe.model.effects import psd_line, spike_candidate
@@ -64,6 +64,19 @@ class AnalyzeOptions:
     tmp_dir: Path | None = None
     datasheet: Path | None = None  # TOML of the part's noise specs (imupipe.report.datasheet)
     temperature_topic: str | None = None
+
+
+def analyze_options(**options: object) -> AnalyzeOptions:
+    """:class:`AnalyzeOptions` from keyword arguments, naming any unknown one.
+
+    Raises:
+        ImupipeError: an option that is not a field of :class:`AnalyzeOptions`.
+    """
+    known = {f.name for f in fields(AnalyzeOptions)}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ImupipeError(f"unknown analyze option(s) {unknown}; known: {sorted(known)}")
+    return AnalyzeOptions(**options)
 
 
 class Outputs(Protocol):

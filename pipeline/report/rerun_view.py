@@ -268,6 +268,23 @@ def _tau_axis(rec: rr.RecordingStream, path: str, ext: Extent, levels: dict[str,
     )
 
 
+def log_extent(x: np.ndarray, y: np.ndarray) -> Extent:
+    """Whole decades covering the finite log10 values ``x`` (τ) and ``y`` (σ)."""
+    x, y = x[np.isfinite(x)], y[np.isfinite(y)]
+    return Extent(
+        float(np.floor(x.min())),
+        float(np.ceil(x.max())),
+        -float(np.ceil(y.max())),
+        -float(np.floor(y.min())),
+    )
+
+
+def decade_grid(rec: rr.RecordingStream, path: str, ext: Extent, unit: str) -> None:
+    """Decade grid of a log-log deviation view: τ in s below it, σ in ``unit`` left of it."""
+    decades = np.arange(-ext.bottom, -ext.top + 1)
+    _tau_axis(rec, path, ext, {f"1e{int(v)} {unit}": -v for v in decades[::-1]})
+
+
 @dataclass(frozen=True)
 class LegendEntry:
     label: str
@@ -361,9 +378,7 @@ def _log_allan(rec: rr.RecordingStream, sensor: str, axes: list[AxisResult]) -> 
                 static=True,
             )
     ext = allan_extent(axes)
-    unit = SI_UNIT[sensor]["mean"].replace("^2", "²")
-    decades = np.arange(-ext.bottom, -ext.top + 1)
-    _tau_axis(rec, path, ext, {f"1e{int(v)} {unit}": -v for v in decades[::-1]})
+    decade_grid(rec, path, ext, SI_UNIT[sensor]["mean"].replace("^2", "²"))
     entries = [LegendEntry(a.name, _color(a.name), ADEV_WIDTH) for a in axes]
     entries.append(LegendEntry("measured, bars: 95 %", LEGEND_COLOR, ADEV_WIDTH))
     if looped:

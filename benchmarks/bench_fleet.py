@@ -1,0 +1,95 @@
+"""Fleet throughput: 2 Dask workers against 1, and the fleet against a plain loop of
+``imupipe.api.analyze`` (issue 14's targets: ≥ 1.8× on 2 cores, ≤ 10 % overhead).
+
+    python benchmarks/bench_fleet.py [--units 24] [--duration 1h] [--dir /tmp/imupipe_bench_fleet]
+
+Records ``--units`` simulated recordings at 100 Hz (seeds 0..units-1, kept in ``--dir`` for the
+next run), warms the numba cache with one analysis, then times, in this process and one after
+the other: the sequential loop, ``run_fleet`` on a LocalCluster of 1 worker, and of 2 workers
+(each including cluster start and stop and the fleet report).  All runs use imupipe analyze's
+defaults (closed loop, figures, recording.rrd).  The load average is printed with every
+timing: on a shared machine the ratios are only as good as the load was steady.  From the
+1-worker run (worker-seconds per unit) it derives what a 1,000-unit fleet of such recordings
+needs, one single-threaded worker per core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+from imupipe.api import analyze, record
+from imupipe.fleet.run import run_fleet
+
+
+def _load() -> str:
+    return "load " + " ".join(f"{v:.1f}" for v in os.getloadavg())
+
+
+def _recordings(folder: Path, units: int, duration: str) -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for k in range(units):
+        path = folder / f"unit{k:03d}_{duration}.mcap"
+        if not path.exists():
+            record(path, duration=duration, rate_hz=100.0, seed=k)
+        paths.append(path)
+    return paths
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--units", type=int, default=24)
+    parser.add_argument("--duration", default="1h")
+    parser.add_argument("--dir", type=Path, default=Path("/tmp/imupipe_bench_fleet"))
+    args = parser.parse_args()
+    print(f"cores {os.cpu_count()}, {_load()}")
+    t0 = time.perf_counter()
+    paths = _recordings(args.dir, args.units, args.duration)
+    print(f"{len(paths)} recordings of {args.duration} at 100 Hz ready "
+          f"({time.perf_counter() - t0:.0f} s)")  # fmt: skip
+    work = Path(tempfile.mkdtemp(prefix="bench_fleet_"))
+    try:
+        analyze(paths[0], work / "warm")  # numba cache, imports: not timed
+
+        t0 = time.perf_counter()
+        per_unit = []
+        for k, path in enumerate(paths):
+            t = time.perf_counter()
+            analyze(path, work / "seq" / f"{k}")
+            per_unit.append(time.perf_counter() - t)
+        t_seq = time.perf_counter() - t0
+        peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+        print(f"sequential loop of analyze: {t_seq:.1f} s ({statistics.median(per_unit):.2f} s "
+              f"per unit, median), peak RSS {peak_gb:.2f} GB, {_load()}")  # fmt: skip
+
+        timings = {}
+        for workers in (1, 2):
+            t0 = time.perf_counter()
+            result = run_fleet(paths, work / f"fleet{workers}", workers=workers)
+            timings[workers] = time.perf_counter() - t0
+            assert not result.failed, [u.error for u in result.failed]
+            print(f"fleet, LocalCluster of {workers} worker(s): {timings[workers]:.1f} s, "
+                  f"{_load()}")  # fmt: skip
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+    speedup = timings[1] / timings[2]
+    overhead = timings[1] / t_seq - 1.0
+    print(f"speedup 2 vs 1 worker: {speedup:.2f}x (target >= 1.8x on 2 cores)")
+    print(f"fleet (1 worker) vs sequential loop: {100 * overhead:+.1f} % (target <= 10 %)")
+    core_s = timings[1] / len(paths)  # one worker, one recording after the other
+    print(f"per unit: {core_s:.1f} worker-seconds ({args.duration} at 100 Hz, 1-worker run)")
+    for n in (16, 64, 256):
+        print(f"1,000 units on {n} workers: {1000 * core_s / n / 3600:.2f} h, "
+              f"~{peak_gb:.1f} GB per worker")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

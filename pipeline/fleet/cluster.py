@@ -1,0 +1,71 @@
+"""The Dask cluster a fleet runs on: an embedded ``LocalCluster`` started and stopped around the
+run, or an existing scheduler (``--scheduler`` / ``DASK_SCHEDULER_ADDRESS``) such as one that
+dask-jobqueue (SLURM, PBS...) or dask-kubernetes started."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Iterator
+
+import dask.config
+from dask.system import CPU_COUNT
+from distributed import Client, LocalCluster
+
+from imupipe.errors import FleetError
+
+CONNECT_TIMEOUT_S = 10.0
+"""How long to try reaching an existing scheduler before giving up (s)."""
+
+
+def scheduler_address(scheduler: str | None) -> str | None:
+    """``scheduler``, else Dask's ``scheduler-address`` setting (``DASK_SCHEDULER_ADDRESS``)."""
+    return scheduler or dask.config.get("scheduler-address", None)
+
+
+@contextlib.contextmanager
+def fleet_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Client]:
+    """A Dask client for the fleet.
+
+    Without an address: a ``LocalCluster`` of ``workers`` processes (default one per core the
+    process may use: ``dask.system.CPU_COUNT`` honours CPU affinity and cgroup quotas), one
+    thread each (the analysis' numba kernels are single-threaded and the GIL is held in parts
+    of it), every server bound to 127.0.0.1 (the scheduler's HTTP routes on a free port rather
+    than 8787), stopped on exit.  With an address: a client of that
+    scheduler; ``workers`` then means "wait until that many workers have joined".
+
+    Raises:
+        FleetError: the scheduler cannot be reached, or ``workers`` did not join in time.
+    """
+    if workers is not None and workers < 1:
+        raise FleetError(f"--workers must be at least 1, not {workers}")
+    address = scheduler_address(scheduler)
+    if address is None:
+        n = workers or CPU_COUNT
+        with (
+            LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address="127.0.0.1:0",
+                silence_logs=logging.ERROR,
+            ) as cluster,
+            Client(cluster) as client,
+        ):
+            yield client
+        return
+    try:
+        client = Client(address, timeout=f"{CONNECT_TIMEOUT_S}s")
+    except (OSError, TimeoutError) as exc:
+        raise FleetError(f"cannot reach the Dask scheduler at {address}: {exc}") from exc
+    with client:
+        if workers is not None:
+            try:
+                client.wait_for_workers(workers, timeout=f"{CONNECT_TIMEOUT_S * 6}s")
+            except TimeoutError as exc:
+                raise FleetError(
+                    f"{address}: fewer than {workers} workers joined within "
+                    f"{CONNECT_TIMEOUT_S * 6:.0f} s"
+                ) from exc
+        yield client

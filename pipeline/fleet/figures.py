@@ -1,0 +1,139 @@
+"""PNG figures of ``fleet.md`` (matplotlib, Agg backend).
+
+- ``fleet_adev_<sensor>.png``: one panel per axis, every unit's overlapping Allan deviation
+  (thin lines) over the population median and its 95 % band (:mod:`imupipe.fleet.curves`);
+- ``fleet_terms_<sensor>.png``: strip plots of N, B and K, one panel per term: each unit's value
+  with its 95 % interval per axis, the population's 95 %/95 % tolerance interval (shaded) and
+  the datasheet value (dashed) when one was given.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import polars as pl
+
+from imupipe.fleet.curves import UNIT_COLUMN
+from imupipe.fleet.population import TermStats, final_terms
+from imupipe.units import PAPER_UNIT, from_si
+from imupipe.vocab import AXES_OF
+
+STRIP_TERMS: tuple[tuple[str, str], ...] = (
+    ("random_walk", "N"),
+    ("bias_instability", "B"),
+    ("rate_random_walk", "K"),
+)
+_TITLES = {"gyro": "Gyroscopes", "accel": "Accelerometers"}
+
+
+def adev_figure(fleet: pl.DataFrame, pop: pl.DataFrame, sensor: str, path: Path) -> Path | None:
+    """Every unit's ADEV per axis of ``sensor`` with the population median and 95 % band."""
+    axes = [a for a in AXES_OF[sensor] if a in set(fleet["axis"].unique())]
+    if not axes:
+        return None
+    fig, panels = plt.subplots(1, len(axes), figsize=(4.2 * len(axes), 4.2), squeeze=False)
+    for ax, axis in zip(panels[0], axes, strict=True):
+        part = fleet.filter(pl.col("axis") == axis)
+        for _, unit in part.group_by(UNIT_COLUMN, maintain_order=True):
+            ax.plot(unit["tau"], unit["adev"], color="0.55", lw=0.7, alpha=0.7)
+        p = pop.filter(pl.col("axis") == axis)
+        ax.fill_between(p["tau"], p["lo"], p["hi"], color="tab:blue", alpha=0.25, lw=0)
+        ax.plot(p["tau"], p["median"], color="tab:blue", lw=2.0)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(axis)
+        ax.set_xlabel("averaging time τ [s]")
+        ax.grid(True, which="major", lw=0.4, alpha=0.6)
+    unit = fleet.filter(pl.col("axis") == axes[0])["unit"][0]
+    panels[0][0].set_ylabel(f"Allan deviation σ(τ) [{unit}]")
+    panels[0][0].plot([], [], color="0.55", lw=0.7, label="each unit")
+    panels[0][0].plot([], [], color="tab:blue", lw=2.0, label="population median")
+    panels[0][0].fill_between([], [], [], color="tab:blue", alpha=0.25, label="95 % of units")
+    panels[0][0].legend(fontsize=7)
+    fig.suptitle(f"{_TITLES[sensor]}: Allan deviation of {fleet[UNIT_COLUMN].n_unique()} units")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def terms_figure(
+    reports: Mapping[str, dict], stats: list[TermStats], sensor: str, path: Path
+) -> Path | None:
+    """Strip plots of N, B, K: each unit's interval per axis, tolerance interval, datasheet."""
+    axes = [a for a in AXES_OF[sensor] if any(a in r["axes"] for r in reports.values())]
+    if not axes:
+        return None
+    by_key = {(s.axis, s.term): s for s in stats}
+    names = sorted(reports)
+    offsets = np.linspace(-0.3, 0.3, len(names)) if len(names) > 1 else np.zeros(1)
+    fig, panels = plt.subplots(1, len(STRIP_TERMS), figsize=(4.2 * len(STRIP_TERMS), 4.2))
+    for ax, (term, symbol) in zip(panels, STRIP_TERMS, strict=True):
+        unit = PAPER_UNIT[sensor][term]
+        for i, axis in enumerate(axes):
+            st = by_key.get((axis, term))
+            if st is not None and st.tolerance is not None:
+                lo, hi = (from_si(v, unit) for v in st.tolerance)
+                ax.fill_between([i - 0.4, i + 0.4], lo, hi, color="tab:blue", alpha=0.15, lw=0)
+            if st is not None and st.datasheet is not None:
+                ax.hlines(from_si(st.datasheet.si(), unit), i - 0.45, i + 0.45, "tab:red", "--")
+            for off, name in zip(offsets, names, strict=True):
+                doc = reports[name]["axes"].get(axis)
+                if doc is None:
+                    continue
+                t = final_terms(doc)[term]
+                x = i + off
+                if t["value"] is not None:
+                    v = from_si(t["value"], unit)
+                    lo = from_si(t["lo"] if t["lo"] is not None else t["value"], unit)
+                    hi = from_si(t["hi"] if t["hi"] is not None else t["value"], unit)
+                    outlier = st is not None and name in st.outliers
+                    ax.errorbar(
+                        x, v, yerr=[[v - lo], [hi - v]], fmt="o", ms=3.5, capsize=2,
+                        color="tab:orange" if outlier else "k",
+                    )  # fmt: skip
+                elif t["hi"] is not None:  # unresolved: its upper bound
+                    ax.plot(x, from_si(t["hi"], unit), "v", color="0.5", ms=4)
+        ax.set_xticks(range(len(axes)), axes)
+        ax.set_yscale("log")
+        ax.set_title(f"{symbol} [{unit}]")
+        ax.grid(True, axis="y", which="major", lw=0.4, alpha=0.6)
+    shown = [by_key[(a, t)] for a in axes for t, _ in STRIP_TERMS if (a, t) in by_key]
+    panels[0].errorbar([], [], yerr=[], fmt="o", color="k", label="unit, 95 % interval")
+    if any(st.outliers for st in shown):
+        panels[0].errorbar([], [], yerr=[], fmt="o", color="tab:orange", label="outlier unit")
+    panels[0].plot([], [], "v", color="0.5", label="unresolved: upper bound")
+    panels[0].fill_between([], [], [], color="tab:blue", alpha=0.15, label="95 %/95 % tolerance")
+    if any(st.datasheet is not None for st in shown):
+        panels[0].plot([], [], "--", color="tab:red", label="datasheet")
+    panels[0].legend(fontsize=7)
+    fig.suptitle(f"{_TITLES[sensor]}: noise terms of {len(names)} units")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def write_fleet_figures(
+    fleet: pl.DataFrame,
+    pop: pl.DataFrame,
+    reports: Mapping[str, dict],
+    stats: list[TermStats],
+    out_dir: Path,
+) -> dict[str, Path]:
+    """Every figure that applies, into ``out_dir``; returns {caption: path}."""
+    written: dict[str, Path] = {}
+    for sensor in ("gyro", "accel"):
+        adev = adev_figure(fleet, pop, sensor, out_dir / f"fleet_adev_{sensor}.png")
+        if adev is not None:
+            written[f"{_TITLES[sensor]}: Allan deviation of every unit"] = adev
+        strips = terms_figure(reports, stats, sensor, out_dir / f"fleet_terms_{sensor}.png")
+        if strips is not None:
+            written[f"{_TITLES[sensor]}: N, B, K per unit"] = strips
+    return written

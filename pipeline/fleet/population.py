@@ -1,0 +1,194 @@
+"""Population statistics of a fleet, per axis and IEEE 952 term.
+
+For each (axis, term) over the units whose term is resolved:
+
+- **median** and **robust spread** (1.4826 · MAD / median: the relative standard deviation a
+  normal population with that MAD has);
+- a two-sided **95 %/95 % tolerance interval** (an interval that holds at least 95 % of the
+  part's units, with 95 % confidence).  With n ≥ 93 units it is distribution-free: the order
+  statistics (X₍ᵣ₎, X₍ₙ₊₁₋ᵣ₎) with the largest r whose coverage, distributed as
+  Beta(n + 1 − 2r, 2r), reaches 95 % with 95 % confidence (Wilks 1941; Hahn & Meeker,
+  *Statistical Intervals*, 1991, §5.3).  With fewer it assumes the term is log-normal across
+  units (noise coefficients are positive scale factors) and uses Howe's k-factor on log10
+  values: k = √((n − 1)(1 + 1/n) z²₍₁₊ₚ₎/₂ / χ²₁₋ᵧ,ₙ₋₁) (Howe 1969, JASA 64:610; NIST/SEMATECH
+  e-Handbook §7.2.6.3);
+- **outlier units**: a unit whose own 95 % interval lies entirely outside the tolerance interval
+  of the *other* units (leave-one-out, so an outlier does not widen the interval it is tested
+  against; needs at least 3 other units).  Accounting for the unit's uncertainty this way, a
+  short recording with a wide interval is not called an outlier for its noisy estimate alone;
+- against a **datasheet** value (:mod:`imupipe.report.datasheet`): a unit fails when its interval
+  lies entirely above the value (its lower bound exceeds it); the population fails a
+  ``typical`` value when its median exceeds it, a ``max`` value when the upper tolerance bound
+  does.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from imupipe.report.datasheet import Datasheet, Spec
+from imupipe.stats.robust import MAD_TO_SIGMA
+from imupipe.vocab import AXES, TERM_NAMES, sensor_of
+
+COVERAGE = 0.95
+CONFIDENCE = 0.95
+MIN_OTHERS_FOR_OUTLIER = 3
+HOWE_METHOD = "Howe k-factor on log10 values (log-normal across units)"
+ORDER_METHOD = "order statistics (distribution-free, Wilks)"
+
+
+@dataclass(frozen=True)
+class UnitTerm:
+    """One unit's estimate of a term (SI): ``value`` with its 95 % interval; an unresolved term
+    has ``value`` None and at most an upper bound ``hi``."""
+
+    unit: str
+    value: float | None
+    lo: float | None
+    hi: float | None
+
+
+@dataclass(frozen=True)
+class TermStats:
+    """The population of one (axis, term): counts, median and robust spread (SI, fraction),
+    95 %/95 % tolerance interval and its method, outlier units, datasheet verdicts."""
+
+    axis: str
+    term: str
+    unit: str
+    units: int
+    resolved: int
+    median: float | None
+    robust_spread: float | None
+    tolerance: tuple[float, float] | None
+    method: str | None
+    outliers: tuple[str, ...]
+    datasheet: Spec | None
+    population_pass: bool | None
+    failing_units: tuple[str, ...]
+
+
+def howe_k(n: int, coverage: float = COVERAGE, confidence: float = CONFIDENCE) -> float:
+    """Howe's (1969) two-sided normal tolerance factor for ``n`` observations."""
+    z = stats.norm.ppf((1 + coverage) / 2)
+    chi2 = stats.chi2.ppf(1 - confidence, n - 1)
+    return float(math.sqrt((n - 1) * (1 + 1 / n) * z * z / chi2))
+
+
+def order_statistic_rank(
+    n: int, coverage: float = COVERAGE, confidence: float = CONFIDENCE
+) -> int | None:
+    """Largest r with P(coverage of (X₍ᵣ₎, X₍ₙ₊₁₋ᵣ₎) ≥ ``coverage``) ≥ ``confidence``, or None
+    when even the extremes (r = 1) are not enough (n < 93 at 95 %/95 %)."""
+    r = np.arange(1, n // 2 + 1)
+    conf = stats.beta.sf(coverage, n + 1 - 2 * r, 2 * r)
+    ok = r[conf >= confidence]
+    return int(ok[-1]) if ok.size else None
+
+
+def tolerance_interval(values: Sequence[float]) -> tuple[tuple[float, float], str] | None:
+    """Two-sided 95 %/95 % tolerance interval of positive ``values`` (module doc), or None for
+    fewer than 2."""
+    x = np.sort(np.asarray(values, dtype=float))
+    n = x.size
+    if n < 2:
+        return None
+    r = order_statistic_rank(n)
+    if r is not None:
+        return (float(x[r - 1]), float(x[n - r])), ORDER_METHOD
+    logs = np.log10(x)
+    k = howe_k(n)
+    mean, sd = logs.mean(), logs.std(ddof=1)
+    return (float(10 ** (mean - k * sd)), float(10 ** (mean + k * sd))), HOWE_METHOD
+
+
+def _interval(u: UnitTerm) -> tuple[float, float] | None:
+    """The unit's 95 % interval; an unresolved term spans [0, upper bound]."""
+    if u.value is None:
+        return None if u.hi is None else (0.0, u.hi)
+    lo = u.lo if u.lo is not None else u.value
+    hi = u.hi if u.hi is not None else u.value
+    return lo, hi
+
+
+def outlier_units(units: Sequence[UnitTerm]) -> tuple[str, ...]:
+    """Units whose 95 % interval misses the others' tolerance interval (module doc)."""
+    out = []
+    resolved = [u for u in units if u.value is not None]
+    for u in units:
+        mine = _interval(u)
+        others = [o.value for o in resolved if o.unit != u.unit]
+        if mine is None or len(others) < MIN_OTHERS_FOR_OUTLIER:
+            continue
+        ti = tolerance_interval(others)
+        if ti is not None and (mine[1] < ti[0][0] or mine[0] > ti[0][1]):
+            out.append(u.unit)
+    return tuple(out)
+
+
+def final_terms(axis_doc: dict) -> dict:
+    """A report.json axis' final IEEE 952 terms: after the closed loop when it ran."""
+    return axis_doc.get("ieee952_after") or axis_doc["ieee952"]
+
+
+def term_stats(
+    axis: str,
+    term: str,
+    si_unit: str,
+    units: Sequence[UnitTerm],
+    datasheet: Spec | None = None,
+) -> TermStats:
+    """The population statistics of one (axis, term) (module doc)."""
+    values = [u.value for u in units if u.value is not None]
+    median = float(np.median(values)) if values else None
+    spread = (
+        float(MAD_TO_SIGMA * np.median(np.abs(np.asarray(values) - median)) / median)
+        if values
+        else None
+    )
+    ti = tolerance_interval(values)
+    population_pass, failing = None, ()
+    if datasheet is not None and values:
+        limit = datasheet.si()
+        failing = tuple(u.unit for u in units if (iv := _interval(u)) is not None and iv[0] > limit)
+        if datasheet.kind == "typical":
+            population_pass = median <= limit
+        else:
+            population_pass = (ti[0][1] if ti else max(values)) <= limit
+    return TermStats(
+        axis=axis,
+        term=term,
+        unit=si_unit,
+        units=len(units),
+        resolved=len(values),
+        median=median,
+        robust_spread=spread,
+        tolerance=ti[0] if ti else None,
+        method=ti[1] if ti else None,
+        outliers=outlier_units(units),
+        datasheet=datasheet,
+        population_pass=population_pass,
+        failing_units=failing,
+    )
+
+
+def population(reports: dict[str, dict], datasheet: Datasheet | None = None) -> list[TermStats]:
+    """Statistics per axis (report order) and term over the ``reports`` (report.json per unit
+    name) of the units that were analysed."""
+    out = []
+    for axis in AXES:
+        docs = {name: r["axes"][axis] for name, r in reports.items() if axis in r["axes"]}
+        if not docs:
+            continue
+        for term in TERM_NAMES:
+            terms = {name: final_terms(doc)[term] for name, doc in docs.items()}
+            units = [UnitTerm(n, t["value"], t["lo"], t["hi"]) for n, t in terms.items()]
+            si_unit = next(iter(terms.values()))["unit"]
+            sheet = datasheet.get(sensor_of(axis), term) if datasheet else None
+            out.append(term_stats(axis, term, si_unit, units, sheet))
+    return out

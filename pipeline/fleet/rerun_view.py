@@ -1,0 +1,86 @@
+"""``fleet.rrd``: every unit's Allan curves in Rerun (rerun-sdk 0.41).
+
+One 2-D view per axis at (log10 τ, −log10 σ), the convention of
+:mod:`imupipe.report.rerun_view` (Rerun has no log axes; 2-D views point y down): each unit's
+curve under ``allan/<axis>/units/<unit>`` (labelled with the unit's name) and the population
+median and 95 % band edges under ``allan/<axis>/population``, with labelled decade grid lines.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import rerun as rr
+import rerun.blueprint as rrb
+
+from imupipe.fleet.curves import UNIT_COLUMN
+from imupipe.report.rerun_view import _log10, _strip, decade_grid, log_extent
+from imupipe.vocab import AXES
+
+UNIT_COLOR = (150, 150, 150)
+MEDIAN_COLOR = (31, 119, 180)
+BAND_COLOR = (120, 170, 210)
+
+
+def _log_axis(rec: rr.RecordingStream, axis: str, fleet: pl.DataFrame, pop: pl.DataFrame) -> None:
+    base = f"allan/{axis}"
+    xs, ys = [], []
+    for (name,), unit in fleet.group_by(UNIT_COLUMN, maintain_order=True):
+        x, y = _log10(unit["tau"].to_numpy()), _log10(unit["adev"].to_numpy())
+        xs.append(x)
+        ys.append(y)
+        rec.log(
+            f"{base}/units/{rr.escape_entity_path_part(str(name))}",
+            rr.LineStrips2D(
+                [_strip(x, y)],
+                colors=UNIT_COLOR,
+                radii=rr.Radius.ui_points(1.0),
+                labels=str(name),
+                draw_order=1,
+            ),
+            static=True,
+        )
+    x = _log10(pop["tau"].to_numpy())
+    for name, color, width in (("median", MEDIAN_COLOR, 2.5), ("lo", BAND_COLOR, 1.5),
+                               ("hi", BAND_COLOR, 1.5)):  # fmt: skip
+        rec.log(
+            f"{base}/population/{name}",
+            rr.LineStrips2D(
+                [_strip(x, _log10(pop[name].to_numpy()))],
+                colors=color,
+                radii=rr.Radius.ui_points(width),
+                labels=f"population {name}" if name == "median" else f"95 % band {name}",
+                draw_order=2,
+            ),
+            static=True,
+        )
+    decade_grid(rec, base, log_extent(np.concatenate(xs), np.concatenate(ys)), fleet["unit"][0])
+
+
+def write_fleet_rrd(fleet: pl.DataFrame, pop: pl.DataFrame, path: Path) -> Path | None:
+    """Write ``fleet.rrd`` (module doc); None when no unit was analysed."""
+    axes = [a for a in AXES if a in set(fleet["axis"].unique())]
+    if not axes:
+        return None
+    rec = rr.RecordingStream("imupipe_fleet", make_default=False, make_thread_default=False)
+    rec.save(path)
+    for axis in axes:
+        _log_axis(
+            rec,
+            axis,
+            fleet.filter(pl.col("axis") == axis),
+            pop.filter(pl.col("axis") == axis),
+        )
+    views = [
+        rrb.Spatial2DView(origin=f"allan/{a}", name=f"{a}: log10 ADEV vs log10 τ") for a in axes
+    ]
+    rec.send_blueprint(
+        rrb.Blueprint(rrb.Tabs(*views), collapse_panels=True, auto_views=False),
+        make_active=True,
+        make_default=True,
+    )
+    rec.flush()
+    rec.disconnect()
+    return path

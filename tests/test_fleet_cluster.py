@@ -1,0 +1,229 @@
+"""``imupipe fleet`` on real Dask clusters: a LocalCluster (2 worker processes) reading a local
+file and an ``s3://`` prefix served by moto's server on 127.0.0.1; and a deployment-style
+cluster (``dask scheduler`` + two ``dask worker`` processes) driven through ``--scheduler``,
+with one worker killed mid-run.  Every server is bound to 127.0.0.1 and stopped here."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import pytest
+
+from imupipe.api import analyze, record
+from imupipe.fleet.curves import UNIT_COLUMN
+from imupipe.fleet.run import run_fleet
+
+BIN = Path(sys.executable).parent
+
+
+def _record(path: Path, seed: int) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    record(path, duration="2m", rate_hz=100, seed=seed)
+    return path
+
+
+def _files(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+@pytest.fixture
+def s3_server(monkeypatch):
+    """moto's S3 server on 127.0.0.1 (a free port); env set so that workers find it."""
+    from moto.server import ThreadedMotoServer
+
+    server = ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
+    server.start()
+    host, port = server.get_host_and_port()
+    for key, value in {
+        "AWS_ACCESS_KEY_ID": "testing",
+        "AWS_SECRET_ACCESS_KEY": "testing",
+        "AWS_DEFAULT_REGION": "us-east-1",
+        "AWS_ENDPOINT_URL_S3": f"http://{host}:{port}",
+    }.items():
+        monkeypatch.setenv(key, value)
+    try:
+        yield f"http://{host}:{port}"
+    finally:
+        server.stop()
+
+
+def test_local_cluster_local_and_s3_units(tmp_path, s3_server):
+    import boto3
+
+    local = _record(tmp_path / "unit_a.mcap", seed=1)
+    remote = _record(tmp_path / "upload" / "unit_b.mcap", seed=2)
+    s3 = boto3.client("s3", endpoint_url=s3_server)
+    s3.create_bucket(Bucket="fleet")
+    s3.upload_file(str(remote), "fleet", "site1/unit_b.mcap")
+    s3.put_object(Bucket="fleet", Key="site1/notes.txt", Body=b"not a recording")
+
+    out = tmp_path / "fleet"
+    result = run_fleet([str(local), "s3://fleet/site1/"], out, workers=2)
+
+    assert [(u.name, u.status, u.source) for u in result.units] == [
+        ("unit_a", "ok", str(local)),
+        ("unit_b", "ok", "s3://fleet/site1/unit_b.mcap"),
+    ]
+    # each unit's folder holds exactly what `imupipe analyze` writes for that recording
+    ref_a = analyze(local, tmp_path / "ref_a")
+    assert _files(out / "unit_a") == _files(tmp_path / "ref_a")
+    assert json.loads((out / "unit_a" / "report.json").read_text()) == ref_a.to_dict()
+    # the s3 unit: the same bytes analysed locally, except that the report names the URL
+    ref_b = analyze(remote, tmp_path / "ref_b").to_dict()
+    got_b = json.loads((out / "unit_b" / "report.json").read_text())
+    assert got_b["input"].pop("path") == "s3://fleet/site1/unit_b.mcap"
+    ref_b["input"].pop("path")
+    assert got_b == ref_b
+    assert _files(out / "unit_b") == _files(tmp_path / "ref_b")
+    assert not (out / ".staging").exists()
+
+    # fleet.parquet: every unit's curves, long form, equal to the unit's allan.parquet
+    fleet = pl.read_parquet(out / "fleet.parquet")
+    a = fleet.filter(pl.col(UNIT_COLUMN) == "unit_a").drop(UNIT_COLUMN)
+    assert a.equals(pl.read_parquet(tmp_path / "ref_a" / "allan.parquet"))
+    assert fleet[UNIT_COLUMN].unique().sort().to_list() == ["unit_a", "unit_b"]
+
+    # fleet.json: the population median of N is the median of the units' final N
+    doc = json.loads((out / "fleet.json").read_text())
+    assert (doc["recordings"], doc["analysed"], doc["failed"]) == (2, 2, 0)
+    row = next(p for p in doc["population"] if p["axis"] == "gyro_x" and p["term"] == "random_walk")
+    values = [
+        u.report["axes"]["gyro_x"].get("ieee952_after", u.report["axes"]["gyro_x"]["ieee952"])[
+            "random_walk"
+        ]["value"]
+        for u in result.units
+    ]
+    assert row["median"] == pytest.approx(float(np.median(values)), rel=1e-12)
+    assert row["unit"] == "rad/s/sqrt(Hz)" and row["resolved"] == 2
+    md = (out / "fleet.md").read_text()
+    assert "2 recordings: 2 analysed, 0 failed." in md
+    for name in ("fleet_adev_gyro.png", "fleet_terms_accel.png", "fleet.rrd"):
+        assert (out / name).stat().st_size > 1000
+
+
+def _wait_for(predicate, timeout_s: float, what: str):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_existing_scheduler_survives_a_killed_worker(tmp_path):
+    from distributed import Client
+
+    good = [_record(tmp_path / f"unit{k}.mcap", seed=10 + k) for k in range(4)]
+    damaged = tmp_path / "damaged.mcap"  # MCAP magic, then garbage
+    damaged.write_bytes(b"\x89MCAP0\r\n" + np.random.default_rng(0).bytes(20_000))
+    not_mcap = tmp_path / "notes.mcap"
+    not_mcap.write_text("this is not a recording\n")
+
+    sched_file = tmp_path / "scheduler.json"
+    local = ["--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0", "--no-dashboard"]
+    procs: list[subprocess.Popen] = []
+    client = None
+    try:
+        procs.append(
+            subprocess.Popen(
+                [BIN / "dask", "scheduler", "--port", "0", "--scheduler-file", sched_file, *local],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+        )
+        _wait_for(sched_file.exists, 60, "the scheduler file")
+        workers = [
+            subprocess.Popen(
+                [
+                    BIN / "dask",
+                    "worker",
+                    "--scheduler-file",
+                    sched_file,
+                    "--nthreads",
+                    "1",
+                    "--no-nanny",
+                    *local,
+                ],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+            for _ in range(2)
+        ]
+        procs += workers
+        client = Client(scheduler_file=str(sched_file), timeout="30s")
+        client.wait_for_workers(2, timeout="60s")
+        address = client.scheduler.address
+        pids = client.run(os.getpid)  # {worker address: pid}
+
+        fleet = subprocess.Popen(
+            [BIN / "imupipe", "fleet", *map(str, [*good, damaged, not_mcap]),
+             "--out", tmp_path / "out", "--scheduler", address, "--no-loop", "--no-rrd", "-q"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        procs.append(fleet)
+
+        def busy_worker():
+            processing = client.processing()
+            return next((a for a, keys in processing.items() if keys), None)
+
+        victim = _wait_for(busy_worker, 120, "a task on a worker")
+        os.kill(pids[victim], signal.SIGKILL)
+        survivor = next(a for a in pids if a != victim)
+        _, err = fleet.communicate(timeout=600)
+    finally:
+        if client is not None:
+            client.close()
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+    assert fleet.returncode == 2, err
+    assert err.splitlines() == [
+        f"warning: damaged: {damaged}: no IMU topic (topics in the file: none)",
+        f"warning: notes: {not_mcap} is not an MCAP file (bad magic)",
+        f"imupipe: error: 2 of 6 recordings failed (listed in {tmp_path / 'out'}/fleet.md)",
+    ]
+    doc = json.loads((tmp_path / "out" / "fleet.json").read_text())
+    units = {u["name"]: u for u in doc["units"]}
+    assert [units[f"unit{k}"]["status"] for k in range(4)] == ["ok"] * 4
+    # the killed worker's task ran again on the surviving worker: it did all the good units
+    survivor_pid = pids[survivor]
+    assert {units[f"unit{k}"]["worker"].rsplit(":", 1)[1] for k in range(4)} == {str(survivor_pid)}
+    for k, path in enumerate(good):
+        ref = analyze(path, tmp_path / f"ref{k}", loop=False, rrd=False)
+        got = json.loads((tmp_path / "out" / f"unit{k}" / "report.json").read_text())
+        assert got == ref.to_dict()
+    assert not (tmp_path / "out" / "damaged").exists()
+    assert "- notes: " in (tmp_path / "out" / "fleet.md").read_text()
+
+
+def test_unreachable_scheduler_is_one_line_exit_2(tmp_path):
+    rec = tmp_path / "x.mcap"
+    rec.write_bytes(b"x")
+    proc = subprocess.run(
+        [BIN / "imupipe", "fleet", rec, "--out", tmp_path / "out", "--scheduler",
+         "tcp://127.0.0.1:9", "-q"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("imupipe: error: cannot reach the Dask scheduler at tcp://")
+    assert len(proc.stderr.splitlines()) == 1

@@ -1,0 +1,229 @@
+"""Fleet building blocks without a cluster: discovery, population statistics, datasheet,
+the Markdown escaping of untrusted names."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import polars as pl
+import pytest
+
+from imupipe.analysis.analyze import AnalyzeOptions
+from imupipe.analysis.results import ALLAN_SCHEMA
+from imupipe.errors import DatasheetError, FleetError
+from imupipe.fleet.curves import fleet_frame, population_curves
+from imupipe.fleet.discover import discover, unique_names
+from imupipe.fleet.population import (
+    HOWE_METHOD,
+    ORDER_METHOD,
+    UnitTerm,
+    howe_k,
+    order_statistic_rank,
+    population,
+    term_stats,
+    tolerance_interval,
+)
+from imupipe.fleet.report import md_text
+from imupipe.fleet.task import budget_for_worker
+from imupipe.report.datasheet import load_datasheet
+from imupipe.units import RAD_PER_DEG
+
+
+@pytest.mark.parametrize(("n", "table"), [(5, 5.079), (10, 3.379), (20, 2.752)])
+def test_howe_k_matches_the_exact_two_sided_table(n, table):
+    # exact 95 %/95 % two-sided normal tolerance factors (Odeh 1978; NIST e-Handbook 7.2.6.3);
+    # Howe's approximation is within 0.3 % of them
+    assert howe_k(n) == pytest.approx(table, rel=3e-3)
+
+
+def test_order_statistics_need_93_units_at_95_95():
+    # the classical minimum sample size for a distribution-free 95 %/95 % two-sided interval
+    assert order_statistic_rank(92) is None
+    assert order_statistic_rank(93) == 1
+    x = np.arange(1.0, 94.0)
+    (lo, hi), method = tolerance_interval(x)
+    assert (lo, hi, method) == (1.0, 93.0, ORDER_METHOD)
+
+
+def test_small_population_uses_howe_on_log_values():
+    values = [1.0, 2.0, 4.0]  # log10 mean log10(2), sd log10(2)
+    (lo, hi), method = tolerance_interval(values)
+    k = howe_k(3)
+    assert method == HOWE_METHOD
+    assert lo == pytest.approx(2.0 / 2.0**k)
+    assert hi == pytest.approx(2.0 * 2.0**k)
+    assert tolerance_interval([1.0]) is None
+
+
+def _units(values, rel=0.05):
+    return [UnitTerm(f"u{i}", v, v * (1 - rel), v * (1 + rel)) for i, v in enumerate(values)]
+
+
+def test_outlier_is_a_unit_whose_interval_misses_the_others_tolerance_interval():
+    rng = np.random.default_rng(1)
+    values = list(1e-3 * np.exp(rng.normal(0, 0.05, 12)))
+    units = [*_units(values), UnitTerm("hot", 2e-3, 1.9e-3, 2.1e-3)]
+    stats = term_stats("gyro_x", "random_walk", "rad/s/sqrt(Hz)", units)
+    assert stats.outliers == ("hot",)
+    # the same estimate with a wide interval (a short recording) is not called an outlier
+    wide = [*_units(values), UnitTerm("hot", 2e-3, 0.8e-3, 4e-3)]
+    assert term_stats("gyro_x", "random_walk", "rad/s/sqrt(Hz)", wide).outliers == ()
+    assert stats.resolved == 13 and stats.units == 13
+    assert stats.median == pytest.approx(float(np.median([*values, 2e-3])))
+
+
+def test_robust_spread_is_scaled_mad_over_median():
+    stats = term_stats("gyro_x", "random_walk", "u", _units([1.0, 2.0, 3.0, 4.0, 10.0]))
+    assert stats.median == 3.0
+    assert stats.robust_spread == pytest.approx(1.4826 * 1.0 / 3.0)
+
+
+def _sheet(tmp_path, body):
+    path = tmp_path / "sheet.toml"
+    path.write_text(body)
+    return load_datasheet(path)
+
+
+def test_datasheet_pass_fail(tmp_path):
+    sheet = _sheet(
+        tmp_path,
+        'part = "ADIS"\n[gyro]\nrandom_walk = { value = 2.0, unit = "°/√h" }\n'
+        'bias_instability = { value = 0.007, unit = "°/s", kind = "max" }\n',
+    )
+    limit = 2.0 * RAD_PER_DEG / 60.0
+    assert sheet.get("gyro", "random_walk").si() == pytest.approx(limit)
+    # median below the typical value: pass; one unit's whole interval above it: failing unit
+    bad = UnitTerm("bad", 1.5 * limit, 1.2 * limit, 1.8 * limit)
+    units = [*_units([0.5 * limit, 0.6 * limit, 0.7 * limit]), bad]
+    st = term_stats("gyro_x", "random_walk", "u", units, sheet.get("gyro", "random_walk"))
+    assert st.population_pass is True
+    assert st.failing_units == ("bad",)
+    # a unit whose interval straddles the value does not fail
+    edge = [UnitTerm("edge", 1.1 * limit, 0.9 * limit, 1.3 * limit)]
+    st = term_stats("gyro_x", "random_walk", "u", edge, sheet.get("gyro", "random_walk"))
+    assert st.failing_units == () and st.population_pass is False  # median above typical
+    # a max value is checked against the upper tolerance bound, not the median
+    b = 0.007 * RAD_PER_DEG
+    st = term_stats("gyro_x", "bias_instability", "u", _units([0.5 * b, 0.6 * b, 0.9 * b]),
+                    sheet.get("gyro", "bias_instability"))  # fmt: skip
+    assert st.median < b and st.tolerance[1] > b and st.population_pass is False
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ("[gyro]\nrandom_wlk = { value = 1.0, unit = 'rad' }\n", "use N, B, K or rms"),
+        ("[gyro]\nrandom_walk = { value = 1.0, unit = 'furlong' }\n", "unit 'furlong' unknown"),
+        ("[magnetometer]\nrandom_walk = { value = 1.0, unit = 'rad' }\n", "unknown section"),
+        ("[gyro]\nrandom_walk = { value = -1.0, unit = 'rad' }\n", "is not a number >= 0"),
+        ("[gyro]\nrandom_walk = { value = 1.0, unit = 'rad', kind = 'min' }\n", "kind"),
+        ("[gyro\n", "not TOML"),
+        ("part = 'x'\n", r"no \[gyro\] or \[accel\] values"),
+    ],
+)
+def test_bad_datasheet_is_one_clear_error(tmp_path, body, message):
+    with pytest.raises(DatasheetError, match=message):
+        _sheet(tmp_path, body)
+
+
+def test_population_uses_terms_after_the_loop():
+    def doc(before, after):
+        term = {"value": before, "lo": before, "hi": before, "unit": "u", "reason": None}
+        final = {**term, "value": after, "lo": after, "hi": after}
+        terms = {t: term for t in ("quantization", "random_walk", "bias_instability",
+                                   "rate_random_walk", "rate_ramp")}  # fmt: skip
+        after = {**terms, "random_walk": final}
+        return {"axes": {"gyro_x": {"ieee952": terms, "ieee952_after": after}}}
+
+    stats = population({"a": doc(1.0, 3.0), "b": doc(1.0, 5.0)})
+    rw = next(s for s in stats if s.term == "random_walk")
+    assert rw.median == 4.0 and rw.axis == "gyro_x"
+    assert next(s for s in stats if s.term == "quantization").median == 1.0
+
+
+def test_discover_files_bags_folders_globs(tmp_path):
+    (tmp_path / "a.mcap").write_bytes(b"x")
+    bag = tmp_path / "site" / "robot 7"
+    bag.mkdir(parents=True)
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (bag / "robot 7_0.mcap").write_bytes(b"x")
+    (tmp_path / "site" / "a.mcap").write_bytes(b"x")
+    (tmp_path / "site" / "notes.txt").write_text("not a recording")
+    recs = discover([str(tmp_path / "site"), str(tmp_path / "*.mcap"), str(tmp_path / "a.mcap")])
+    # the bag once (not its split file), the nested a.mcap, the top a.mcap once (glob + file)
+    assert [(r.name, r.is_dir, r.local) for r in recs] == [
+        ("robot_7", True, True),
+        ("a", False, True),
+        ("a-2", False, True),
+    ]
+    assert recs[0].location == str(bag)
+    with pytest.raises(FleetError, match="no recording"):
+        discover([str(tmp_path / "missing")])
+    with pytest.raises(FleetError, match="no recording"):
+        discover([str(tmp_path / "site" / "*.bag")])
+
+
+def test_unit_names_are_safe_and_unique():
+    assert unique_names(["/x/../a b.mcap", "/y/a b.mcap", "/z/a_b-2.mcap", "/w/.hidden"]) == [
+        "a_b",
+        "a_b-2",
+        "a_b-2-2",
+        "hidden",
+    ]
+
+
+def test_md_text_escapes_markup():
+    assert md_text("a|b`c`<script>\n[x](y)") == r"a|b\`c\`\<script\> \[x\](y)"
+
+
+def test_population_curve_is_the_median_and_band_of_the_units():
+    tau = np.array([1.0, 10.0, 100.0])
+
+    def curve(scale):
+        n = len(tau)
+        return pl.DataFrame(
+            {"axis": ["gyro_x"] * n, "unit": ["rad/s"] * n, "tau": tau,
+             "adev": scale / np.sqrt(tau), "lo": np.nan, "hi": np.nan, "edf": 1.0,
+             "terms": 1, "alpha": 0.0,
+             "adev_after": np.nan, "model_before": np.nan, "model_after": np.nan,
+             "z_before": np.nan, "z_after": np.nan},
+            schema=ALLAN_SCHEMA,
+        )  # fmt: skip
+
+    fleet = fleet_frame({"a": curve(1.0), "b": curve(2.0), "c": curve(4.0)})
+    assert fleet["unit_name"].to_list() == ["a"] * 3 + ["b"] * 3 + ["c"] * 3
+    pop = population_curves(fleet)
+    at10 = pop.filter((pl.col("tau") - 10.0).abs() < 1e-9)
+    assert at10["median"][0] == pytest.approx(2.0 / math.sqrt(10.0))
+    assert at10["units"][0] == 3
+    # 2.5th/97.5th percentiles of log10 values (0, log 2, log 4) -> close to the extremes
+    assert at10["lo"][0] == pytest.approx(10 ** (0.05 * math.log10(2)) / math.sqrt(10.0))
+    # a τ that only one of three units reaches is not the population's
+    longer = curve(1.0).with_columns(pl.col("tau") * 10)
+    pop = population_curves(fleet_frame({"a": longer, "b": curve(2.0), "c": curve(4.0)}))
+    assert pop["tau"].max() == pytest.approx(100.0)
+
+
+def test_worker_memory_caps_the_analysis_budget():
+    options = AnalyzeOptions(memory_budget_bytes=2_000_000_000)
+    assert budget_for_worker(options, None) == options
+    assert budget_for_worker(options, 10_000_000_000).memory_budget_bytes == 2_000_000_000
+    assert budget_for_worker(options, 1_000_000_000).memory_budget_bytes == 600_000_000
+
+
+def test_bad_arguments_fail_before_any_worker_starts(tmp_path, monkeypatch):
+    from imupipe.fleet import run
+
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("the cluster must not start")
+
+    monkeypatch.setattr(run, "fleet_client", no_cluster)
+    rec = tmp_path / "a.mcap"
+    rec.write_bytes(b"x")
+    sheet = tmp_path / "sheet.toml"
+    sheet.write_text("[gyro]\nrandom_walk = { value = 1.0, unit = 'furlong' }\n")
+    with pytest.raises(DatasheetError, match="unknown"):
+        run.run_fleet([rec], tmp_path / "out", datasheet=sheet)
+    with pytest.raises(FleetError, match="no recording"):
+        run.run_fleet([tmp_path / "nothing_here"], tmp_path / "out")
