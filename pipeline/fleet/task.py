@@ -33,6 +33,8 @@ from imupipe.analysis.analyze import analyze as run_analysis
 from imupipe.errors import ImupipeError
 from imupipe.fleet.discover import Recording
 from imupipe.progress import StageProgress
+from imupipe.report.datasheet import load_datasheet
+from imupipe.report.outputs import ReportOutputs
 
 WORKER_MEMORY_SHARE = 0.6
 """Fraction of a Dask worker's memory limit one analysis may plan for: above it the recording
@@ -118,13 +120,15 @@ def analyze_unit(rec: Recording, out_root: str, options: AnalyzeOptions) -> Unit
     staging = root / STAGING / f"{rec.name}-{uuid.uuid4().hex}"
     opts = budget_for_worker(options, _worker_memory_limit())
     try:
+        sheet = None if opts.datasheet is None else load_datasheet(opts.datasheet)
+        outputs = ReportOutputs(staging, opts.figures, opts.rrd_full, datasheet=sheet)
         with local_copy(rec) as path:
-            result = run_analysis(path, staging, opts, StageProgress(quiet=True))
+            result = run_analysis(path, opts, StageProgress(quiet=True), outputs)
         if not rec.local:  # report the URL, not the worker's temporary copy
             from imupipe.report.report import write_report
 
-            result.input.path = rec.location
-            write_report(result, staging, figures=opts.figures)
+            result = replace(result, input=replace(result.input, path=rec.location))
+            write_report(result, staging, figures=opts.figures, datasheet=sheet)
         publish(staging, root / rec.name)
     except Exception as exc:  # any failure is this unit's, never the fleet's
         shutil.rmtree(staging, ignore_errors=True)
