@@ -64,7 +64,7 @@ def test_sources_hand_out_the_decoded_values(tmp_path: Path, make) -> None:
                     assert got is None, name
                 else:
                     np.testing.assert_array_equal(got, expected.to_numpy(), err_msg=name)
-            shown = spilled.signals(cond, rows)
+            shown = spilled.signals(rows)
     finally:
         columns_module.scan = real_scan
     assert scans == [path]

@@ -123,6 +123,7 @@ SUBSETS = [
     frozenset({"t_s", "temp_c"}),
     frozenset({"stamp_ns", "temp_c", "t_s", "diag_stat"}),
     frozenset({"gyro_y"}),
+    frozenset({"t_s"}),  # alone: the spilled source's rrd time column
 ]
 
 

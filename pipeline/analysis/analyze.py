@@ -261,10 +261,10 @@ def analyze(
         rec = source.conditioning()
         series = condition(rec, gaps=options.gaps)
         check_frames(rec, series.usable_samples)
-        if options.rrd:
-            outputs.begin(source.signals(rec.frames, series.rows))
         about = replace(rec, frames=rec.frames.clear())
         del rec  # the spilled source's conditioning columns (t_s: 691 MB at 24 h / 1 kHz)
+        if options.rrd:
+            outputs.begin(source.signals(series.rows))
         try:
             results, stuck = analyze_axes(source, series, options, progress)
             if not results:

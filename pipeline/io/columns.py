@@ -140,9 +140,8 @@ class ColumnSource(ABC):
         filled from the neighbours; None if the recording has no value in it."""
 
     @abstractmethod
-    def signals(self, conditioning: pl.DataFrame, rows: slice) -> pl.DataFrame:
-        """The raw :data:`SIGNALS` over ``rows`` for the Rerun recording (``conditioning``:
-        the frame :meth:`conditioning` gave)."""
+    def signals(self, rows: slice) -> pl.DataFrame:
+        """The raw :data:`SIGNALS` over ``rows`` for the Rerun recording."""
 
     @abstractmethod
     def notes(self, frames: int, rrd: bool) -> list[str]:
@@ -163,7 +162,7 @@ class InMemoryColumns(ColumnSource):
     def column(self, name: str, rows: slice) -> np.ndarray | None:
         return fill_housekeeping(self.rec.frames[name].slice(rows.start, rows.stop - rows.start))
 
-    def signals(self, conditioning: pl.DataFrame, rows: slice) -> pl.DataFrame:
+    def signals(self, rows: slice) -> pl.DataFrame:
         return self.rec.frames.slice(rows.start, rows.stop - rows.start)
 
     def notes(self, frames: int, rrd: bool) -> list[str]:
@@ -198,8 +197,10 @@ class SpilledColumns(ColumnSource):
         x = fill_housekeeping(frame[name].slice(rows.start, rows.stop - rows.start))
         return x if x is None or len(x) == frame.height else x.copy()
 
-    def signals(self, conditioning: pl.DataFrame, rows: slice) -> pl.DataFrame:
-        shown = {"t_s": envelope_times(conditioning["t_s"].to_numpy()[rows])}
+    def signals(self, rows: slice) -> pl.DataFrame:
+        """Each signal built alone (``t_s`` again: the caller need not keep the conditioning
+        columns alive meanwhile) and reduced to its envelope before the next one."""
+        shown = {"t_s": envelope_times(self._frame(frozenset({"t_s"}))["t_s"].to_numpy()[rows])}
         for name in SIGNALS[1:]:
             x = self.column(name, rows)
             if x is not None:

@@ -652,8 +652,11 @@ class ScannedRecording:
             temp = self.temperature.concat() if self.temperature is not None else None
             frames = _imu_frame(cols, temp, n, columns)
             source = IMU_SCHEMA
+        if t_s is not None:  # (a frame of no other column has no rows to broadcast t_s to)
+            t_col = pl.Series("t_s", t_s)
+            frames = frames.with_columns(t_col) if frames.width else t_col.to_frame()
         return ImuRecording(
-            frames=frames if t_s is None else frames.with_columns(pl.Series("t_s", t_s)),
+            frames=frames,
             path=self.path,
             topic=self.topic,
             source=source,
