@@ -250,3 +250,13 @@ def write_rosbag2(directory: Path, streams: list[Stream], **options) -> Path:
 """
     )
     return path
+
+
+def write_robot_bag(directory: Path, seconds: float = 300.0, rate_hz: float = 100.0) -> Path:
+    """The robot bag the documentation analyses (``robot_bag/``): a rosbag2 directory holding
+    ``/imu/data`` (``sensor_msgs/msg/Imu`` at ``rate_hz``, white noise of 0.01 rad/s and
+    0.03 m/s² rms, gravity on z, no awkward values), ``/imu/temperature`` (10 Hz) and ``/tf``
+    (100 Hz); returns the MCAP file."""
+    others = [s for s in other_streams(seconds, camera=False, seed=1) if s.topic != "/odom"]
+    imu = imu_stream("/imu/data", seconds, rate_hz, seed=0, awkward=False)
+    return write_rosbag2(directory, [imu, *others])
