@@ -10,8 +10,8 @@ and no internal error on stderr.
 
 Not run: the lines of :data:`NOT_RUN` (each with its reason), and the README's install line
 ``… && imupipe demo`` (it starts with ``python3``, not ``imupipe``: it is the 12 h main job the CI
-runs).  A sub-command the CLI does not have yet fails, unless :data:`PENDING` names it.  Every
-relative link of the pages must resolve (or name a page of :data:`PENDING_PAGES`).
+runs).  A sub-command the CLI does not have fails.  Every relative link of the pages must
+resolve.
 """
 
 from __future__ import annotations
@@ -40,21 +40,9 @@ NOT_RUN: dict[str, str] = {
     "--source spi": "needs an ADIS16364 on an SPI bus",
     "--realtime": "records in real time (the night it documents) into a Rerun window or server",
     "/tmp/adis16405_bag": "a real ADIS16405 recording from /work/shared, not committed",
+    "fleet_demo/": "a fleet of the real ADIS16405 recordings (not committed) and 4 x 2 h units",
 }
 """A command containing the key is not run, for the reason given."""
-
-PENDING: dict[str, str] = {
-    "export": "lands with the finalmodel branch (docs/exports.md)",
-    "fleet": "lands with the fleet branch (docs/fleets.md)",
-}
-"""Sub-commands the docs show before they are merged: skipped while the CLI lacks them."""
-
-PENDING_PAGES: dict[str, str] = {
-    "exports.md": "lands with the finalmodel branch",
-    "fleets.md": "lands with the fleet branch",
-    "robustness.md": "lands with the hostile-input branch",
-}
-"""Pages the docs link to before they are merged."""
 
 VIEW_STUB = """\
 import sys
@@ -136,9 +124,7 @@ def test_every_relative_link_of_the_docs_resolves() -> None:
         f"{page.relative_to(ROOT)}: {target}"
         for page in PAGES
         for target in re.findall(r"\]\(([^)\s#]+)(?:#[^)]*)?\)", page.read_text())
-        if "://" not in target
-        and not (page.parent / target).exists()
-        and Path(target).name not in PENDING_PAGES
+        if "://" not in target and not (page.parent / target).exists()
     ]
     assert not broken
 
@@ -181,9 +167,7 @@ def test_every_command_of_the_page_runs(page: str, tmp_path: Path, robot_bag: Pa
         if any(key in command.text for key in NOT_RUN):
             continue
         sub = shlex.split(command.text)[1]
-        if sub not in known:
-            assert sub in PENDING, f"{page}:{command.line}: no command {sub!r} in the CLI"
-            continue
+        assert sub in known, f"{page}:{command.line}: no command {sub!r} in the CLI"
         done = subprocess.run(
             _argv(command, workspace), cwd=workspace, capture_output=True, text=True, env=env
         )
@@ -192,6 +176,4 @@ def test_every_command_of_the_page_runs(page: str, tmp_path: Path, robot_bag: Pa
         assert "internal error" not in done.stderr, f"{where}\n{done.stderr}"
         assert done.returncode == command.exit_code, f"{where}\n{done.stderr[-2000:]}"
         ran += 1
-    assert ran or all(
-        any(k in c.text for k in NOT_RUN) or shlex.split(c.text)[1] in PENDING for c in commands
-    )
+    assert ran or all(any(k in c.text for k in NOT_RUN) for c in commands)
