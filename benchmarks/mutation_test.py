@@ -16,7 +16,8 @@ Usage (from the repository root, in the project's virtualenv with ``pip install 
     python benchmarks/mutation_test.py --list
 
 Prints, per module: mutants, killed, survived, timeouts (counted as killed), skipped (outside
-``--functions``) and the diff of every survivor.
+``--functions``, or a float -> bit-operator swap unless ``--all-operators``) and the diff of
+every survivor.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import argparse
 import ast
 import json
 import os
+import re
 import shlex
 import subprocess
 import sys
@@ -85,7 +87,18 @@ def _function_lines(module: Path, names: set[str]) -> set[int]:
 
 def _test_command(tests: tuple[str, ...]) -> str:
     return shlex.join(
-        [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests]
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-x",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            "-p",
+            "no:xdist",
+            *tests,
+        ]
     )
 
 
@@ -95,7 +108,14 @@ def _check_clean(module: str) -> None:
         raise SystemExit(f"{module} has uncommitted changes: commit it (mutation edits in place)")
 
 
-def run_module(module: str, functions: set[str], timeout: float, env: dict[str, str]) -> Score:
+# float arithmetic turned into bit operations raises TypeError on every call: always killed,
+# and 5 of them per operator; skipped unless --all-operators
+BIT_OPERATORS = re.compile(r"_(RShift|LShift|BitOr|BitAnd|BitXor)$")
+
+
+def run_module(
+    module: str, functions: set[str], all_operators: bool, timeout: float, env: dict[str, str]
+) -> Score:
     """Initialise, filter and execute one cosmic-ray session; return the counts."""
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import TestOutcome, WorkerOutcome, WorkResult
@@ -121,19 +141,22 @@ def run_module(module: str, functions: set[str], timeout: float, env: dict[str, 
     cr = [sys.executable, "-m", "cosmic_ray.cli"]
     subprocess.run([*cr, "init", str(config), str(session)], cwd=ROOT, env=env, check=True)
 
-    skipped = 0
-    if functions:
-        keep = _function_lines(ROOT / module, functions)
-        with use_db(str(session), WorkDB.Mode.open) as db:
-            drop = [
-                item.job_id
-                for item in db.pending_work_items
-                if not any(m.start_pos[0] in keep for m in item.mutations)
-            ]
+    keep = _function_lines(ROOT / module, functions) if functions else None
+    with use_db(str(session), WorkDB.Mode.open) as db:
+        drop = [
+            item.job_id
+            for item in db.pending_work_items
+            if any(
+                (keep is not None and m.start_pos[0] not in keep)
+                or (not all_operators and BIT_OPERATORS.search(m.operator_name))
+                for m in item.mutations
+            )
+        ]
+        if drop:
             db.set_multiple_results(
                 drop, WorkResult(worker_outcome=WorkerOutcome.SKIPPED, output="not selected")
             )
-            skipped = len(drop)
+    skipped = len(drop)
 
     try:
         subprocess.run([*cr, "exec", str(config), str(session)], cwd=ROOT, env=env, check=True)
@@ -167,6 +190,9 @@ def main() -> None:
     parser.add_argument(
         "--no-jit", action="store_true", help="NUMBA_DISABLE_JIT=1 (no recompile per mutant)"
     )
+    parser.add_argument(
+        "--all-operators", action="store_true", help="also float -> bit-operator replacements"
+    )
     parser.add_argument("--list", action="store_true", help="print the module -> tests map")
     args = parser.parse_args()
     if args.list or not args.modules:
@@ -180,7 +206,7 @@ def main() -> None:
     if args.no_jit:
         env["NUMBA_DISABLE_JIT"] = "1"
     functions = {f for f in args.functions.split(",") if f}
-    scores = [run_module(m, functions, args.timeout, env) for m in args.modules]
+    scores = [run_module(m, functions, args.all_operators, args.timeout, env) for m in args.modules]
     print("\nmodule                              mutants killed survived timeouts skipped score")
     for s in scores:
         print(
