@@ -269,3 +269,19 @@ def test_mask_policy_duplicate_stamp_row_is_excluded_not_shifted() -> None:
     s = condition(recording(stamp_ns=dup), gaps="mask")
     assert s.samples == 1000  # the counter keeps every row in its place
     np.testing.assert_array_equal(np.flatnonzero(s.excluded), [100])
+
+
+def test_rate_without_a_configured_one_is_the_median_stamp_step() -> None:
+    """A stream that does not state its rate (a plain ROS bag): 1 / median step, here 200 Hz."""
+    rec = recording(rate=200.0)
+    rec = ImuRecording(rec.frames, rec.path, rec.topic, rec.source, rec.time_source, {})
+    s = condition(rec)
+    assert s.tau0_s == pytest.approx(0.005, rel=1e-12, abs=0)
+    assert len(s.segments) == 1 and s.segment.frames == 1000
+
+
+def test_rate_cannot_be_told_from_stamps_that_never_increase() -> None:
+    rec = recording(stamp_ns=lambda a: a.fill(5))
+    rec = ImuRecording(rec.frames, rec.path, rec.topic, rec.source, rec.time_source, {})
+    with pytest.raises(ImupipeError, match="cannot tell the sample rate"):
+        condition(rec)
