@@ -13,7 +13,11 @@ Usage (from the repository root, in the project's virtualenv with ``pip install 
 
     python benchmarks/mutation_test.py pipeline/units.py pipeline/vocab.py
     python benchmarks/mutation_test.py pipeline/stats/edf.py --functions edf_overlapping --no-jit
+    python benchmarks/mutation_test.py pipeline/units.py --session /tmp/imupipe-mutation-XXXX
     python benchmarks/mutation_test.py --list
+
+``--session`` resumes a session (printed at the start of a run) and re-tests only its survivors,
+after tests were added to kill them.
 
 Prints, per module: mutants, killed, survived, timeouts (counted as killed), skipped (outside
 ``--functions``, or a float -> bit-operator swap unless ``--all-operators``) and the diff of
@@ -28,6 +32,7 @@ import json
 import os
 import re
 import shlex
+import sqlite3
 import subprocess
 import sys
 import tempfile
@@ -113,12 +118,25 @@ def _check_clean(module: str) -> None:
 BIT_OPERATORS = re.compile(r"_(RShift|LShift|BitOr|BitAnd|BitXor)$")
 
 
+def _retest_survivors(session: Path) -> None:
+    """Forget the survivors of an earlier run so that ``exec`` tests them again (after tests were
+    added), keeping every kill and skip."""
+    with sqlite3.connect(session) as db:
+        db.execute("DELETE FROM work_results WHERE test_outcome = 'SURVIVED'")
+
+
 def run_module(
-    module: str, functions: set[str], all_operators: bool, timeout: float, env: dict[str, str]
+    module: str,
+    functions: set[str],
+    all_operators: bool,
+    timeout: float,
+    env: dict[str, str],
+    resume: Path | None = None,
 ) -> Score:
-    """Initialise, filter and execute one cosmic-ray session; return the counts."""
+    """Initialise, filter and execute one cosmic-ray session (or resume the one in ``resume``,
+    re-testing its survivors); return the counts."""
     from cosmic_ray.work_db import WorkDB, use_db
-    from cosmic_ray.work_item import TestOutcome, WorkerOutcome, WorkResult
+    from cosmic_ray.work_item import WorkerOutcome, WorkResult
 
     _check_clean(module)
     command = _test_command(TESTS[module])
@@ -126,9 +144,13 @@ def run_module(
     if baseline.returncode != 0:
         raise SystemExit(f"{module}: the unmutated tests fail ({command}); fix them first")
 
-    work = Path(tempfile.mkdtemp(prefix="imupipe-mutation-"))
+    work = resume or Path(tempfile.mkdtemp(prefix="imupipe-mutation-"))
+    print(f"{module}: session in {work}", flush=True)
     config = work / "config.toml"
     session = work / "session.sqlite"
+    if resume is not None:
+        _retest_survivors(session)
+        return _execute(module, config, session, env)
     config.write_text(
         "[cosmic-ray]\n"
         f"module-path = {json.dumps(module)}\n"
@@ -156,8 +178,15 @@ def run_module(
             db.set_multiple_results(
                 drop, WorkResult(worker_outcome=WorkerOutcome.SKIPPED, output="not selected")
             )
-    skipped = len(drop)
+    return _execute(module, config, session, env)
 
+
+def _execute(module: str, config: Path, session: Path, env: dict[str, str]) -> Score:
+    """Run the pending mutants of a session and count the outcomes."""
+    from cosmic_ray.work_db import WorkDB, use_db
+    from cosmic_ray.work_item import TestOutcome, WorkerOutcome
+
+    cr = [sys.executable, "-m", "cosmic_ray.cli"]
     try:
         subprocess.run([*cr, "exec", str(config), str(session)], cwd=ROOT, env=env, check=True)
     finally:
@@ -167,11 +196,12 @@ def run_module(
         if restored.returncode != 0:
             raise SystemExit(f"{module} was NOT restored after mutation: `git checkout {module}`")
 
-    killed = survived = timeouts = 0
+    killed = survived = timeouts = skips = 0
     survivors: list[str] = []
     with use_db(str(session), WorkDB.Mode.open) as db:
         for item, result in db.completed_work_items:
             if result.worker_outcome == WorkerOutcome.SKIPPED:
+                skips += 1
                 continue
             if result.test_outcome == TestOutcome.SURVIVED:
                 survived += 1
@@ -179,7 +209,7 @@ def run_module(
             else:
                 killed += 1
                 timeouts += result.output == "timeout"
-    return Score(module, killed + survived, killed, survived, timeouts, skipped, tuple(survivors))
+    return Score(module, killed + survived, killed, survived, timeouts, skips, tuple(survivors))
 
 
 def main() -> None:
@@ -192,6 +222,12 @@ def main() -> None:
     )
     parser.add_argument(
         "--all-operators", action="store_true", help="also float -> bit-operator replacements"
+    )
+    parser.add_argument(
+        "--session",
+        type=Path,
+        help="resume the session directory printed by an earlier run of ONE module, re-testing "
+        "its survivors (after adding tests)",
     )
     parser.add_argument("--list", action="store_true", help="print the module -> tests map")
     args = parser.parse_args()
@@ -206,7 +242,12 @@ def main() -> None:
     if args.no_jit:
         env["NUMBA_DISABLE_JIT"] = "1"
     functions = {f for f in args.functions.split(",") if f}
-    scores = [run_module(m, functions, args.all_operators, args.timeout, env) for m in args.modules]
+    if args.session is not None and len(args.modules) != 1:
+        raise SystemExit("--session resumes the run of one module")
+    scores = [
+        run_module(m, functions, args.all_operators, args.timeout, env, args.session)
+        for m in args.modules
+    ]
     print("\nmodule                              mutants killed survived timeouts skipped score")
     for s in scores:
         print(
