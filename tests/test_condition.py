@@ -291,3 +291,23 @@ def test_rate_cannot_be_told_from_stamps_that_never_increase() -> None:
     rec = ImuRecording(rec.frames, rec.path, rec.topic, rec.source, rec.time_source, {})
     with pytest.raises(ImupipeError, match="cannot tell the sample rate"):
         condition(rec)
+
+
+def test_repeated_counter_is_a_break_not_a_wrap() -> None:
+    """The same frame read twice (counter does not advance): cut there, no wrap counted."""
+
+    def repeat(a):
+        a[400:] -= 1
+
+    s = condition(recording(counter=repeat))
+    assert s.counts["counter_wraps"] == 0
+    assert [(g.start, g.stop) for g in s.segments] == [(0, 400), (400, 1000)]
+
+
+def test_gap_at_the_last_step_of_two_frames() -> None:
+    def late(a):
+        a[1] = 1_000_000_000  # 1 s after the first frame at 100 Hz
+
+    s = condition(recording(n=2, stamp_ns=late))
+    assert s.counts["gaps"] == 1
+    assert [(g.start, g.stop) for g in s.segments] == [(0, 1), (1, 2)]
