@@ -311,3 +311,28 @@ def test_gap_at_the_last_step_of_two_frames() -> None:
     s = condition(recording(n=2, stamp_ns=late))
     assert s.counts["gaps"] == 1
     assert [(g.start, g.stop) for g in s.segments] == [(0, 1), (1, 2)]
+
+
+def test_mask_policy_backwards_stamp_row_is_excluded() -> None:
+    """A stamp going backwards: its row's time is wrong, so its grid place is masked."""
+
+    def backwards(a):
+        a[100] = a[99] - 1_000_000  # 1 ms before its predecessor
+
+    s = condition(recording(stamp_ns=backwards), gaps="mask")
+    assert s.samples == 1000 and s.counts["non_monotonic_stamps"] == 1
+    np.testing.assert_array_equal(np.flatnonzero(s.excluded), [100])
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known bug: the row after a stamp 2 periods back is placed "
+    "by its stamp step (3) although the counter (1) is right; grid shifted by 2",
+)
+def test_mask_policy_stamp_two_periods_back_does_not_shift_the_grid() -> None:
+    def backwards(a):
+        a[100] = a[98]
+
+    s = condition(recording(stamp_ns=backwards), gaps="mask")
+    assert s.samples == 1000 and s.tau0_s == pytest.approx(0.01, rel=1e-9)
+    np.testing.assert_array_equal(np.flatnonzero(s.excluded), [100])
