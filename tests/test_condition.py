@@ -336,3 +336,15 @@ def test_mask_policy_stamp_two_periods_back_does_not_shift_the_grid() -> None:
     s = condition(recording(stamp_ns=backwards), gaps="mask")
     assert s.samples == 1000 and s.tau0_s == pytest.approx(0.01, rel=1e-9)
     np.testing.assert_array_equal(np.flatnonzero(s.excluded), [100])
+
+
+def test_mask_policy_stamp_gap_wins_over_a_counter_that_disagrees() -> None:
+    """Stamps jump 7 periods where the counter steps by 1: the stamps place the row (6 grid
+    samples masked) and the row itself is uncertain, masked too."""
+
+    def jump(a):
+        a[300:] += 60_000_000
+
+    s = condition(recording(stamp_ns=jump), gaps="mask")
+    assert s.samples == 1006
+    np.testing.assert_array_equal(np.flatnonzero(s.excluded), np.arange(300, 307))
