@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_lowmem import adis_recording, imu_bag, run
+from test_lowmem import N, adis_recording, imu_bag, run
 
 import imupipe.analysis.analyze as analyze_module
 import imupipe.io.columns as columns_module
@@ -110,7 +110,8 @@ def test_tmp_dir_must_exist_and_have_room(tmp_path: Path, monkeypatch) -> None:
         run(path, tmp_path / "out", 0, tmp_dir=tmp_path)
     # in memory, no temporary disk is needed
     report, _ = run(path, tmp_path / "out", 10**12, tmp_dir=tmp_path)
-    assert report["input"]["frames"] > 0
+    # frames analysed: the longest run, after the NaN at N/2 (5-frame gap at N/4 before it)
+    assert report["input"]["frames"] == N // 2 - 1
 
 
 def test_cli_tmp_dir_option(tmp_path: Path, monkeypatch, capsys) -> None:
