@@ -302,3 +302,21 @@ def test_interval_ends_are_where_the_deviance_rises_by_chi2_95(seed: int) -> Non
             profile = ieee952.fit_nonneg_gamma(others, a, nu, end**2 * x[:, j])[1]
             rise = (profile - fit.deviance) / fit.dispersion
             assert rise == pytest.approx(CHI2_1DOF_95, rel=2e-3), (name, end)
+
+
+def test_b_limit_binds_only_a_rejected_fit():
+    """The possible-B limit (plateau under the curve) is applied only when the free fit is
+    rejected: an adequate fit keeps its B even where a limit lies below it (the default 12 h
+    simulation's accel_z, whose long-τ points dip by chance), a misfit loses it."""
+    tau = 0.01 * tau_factors(2**22)
+    b_true = 1.3e-3
+    avar = ieee952.avar_model(tau, random_walk=2.8e-3, bias_instability=b_true)
+    edf = np.full_like(tau, 1e3)
+    limit = 0.25 * b_true**2  # a cap far below the true B²
+    free = ieee952.fit_composite(tau, avar, edf, flicker_max=limit)
+    assert free.p_value >= ieee952.ADEQUATE_P
+    assert np.sqrt(free.coef[2]) == pytest.approx(b_true, rel=1e-3)
+    hump = avar * (1 + 2.0 * np.exp(-((np.log10(tau) - 1.0) ** 2) / 0.1))  # an unmodelled bump
+    held = ieee952.fit_composite(tau, hump, edf, flicker_max=limit)
+    assert held.p_value < ieee952.ADEQUATE_P
+    assert held.coef[2] <= limit

@@ -441,6 +441,10 @@ def asymptote_caps(tau: np.ndarray, avar_hi: np.ndarray, tau_min: float) -> np.n
     return np.min(hi[keep, None] / design_columns(tau[keep]), axis=0)
 
 
+ADEQUATE_P = 0.001
+"""Goodness-of-fit p-value below which a fit is rejected on its range (:func:`_adequacy`)."""
+
+
 def fit_composite(
     tau: np.ndarray,
     avar: np.ndarray,
@@ -461,7 +465,8 @@ def fit_composite(
     with a low cut-off the flicker column is small on the grid and B may grow without bound
     while contributing little; a B whose plateau 0.664 B lies above the measured curve
     (:func:`flicker_limit`) is physically impossible, so such (f0, sign) fits are passed over
-    while a possible one exists.
+    while a possible one exists — unless the free fit is adequate (p ≥ :data:`ADEQUATE_P`): its
+    B then agrees with the curve and the lowest points dipped by chance.
     """
     extra = extra or {}
     tau = np.ascontiguousarray(tau, dtype=float)
@@ -477,21 +482,28 @@ def fit_composite(
     designs[:, :, 2] = np.tile(flicker[idx].T, (len(signs), 1))
     a = np.ascontiguousarray(avar[idx], dtype=float)
     coefs, devs = _fit_designs(designs, a, np.ascontiguousarray(edf[idx], dtype=float))
-    possible = coefs[:, 2] <= flicker_max
-    best: CompositeFit | None = None
-    for k, (coef, dev) in enumerate(zip(coefs, devs.tolist(), strict=True)):
-        if possible.any() and not possible[k]:
-            continue
-        if best is None or dev < best.deviance - 1e-9:
-            sign, f0 = signs[k // len(grid)], grid[k % len(grid)]
-            design = base.copy()
-            design[:, 0] *= sign
-            design[:, 2] = flicker[:, k % len(grid)]
-            n_par = design.shape[1] + n_nonlinear + (cutoff_hz is None and np.isfinite(f0))
-            dof = max(len(idx) - int(n_par), 1)
-            best = CompositeFit(names, coef, design, idx, dev, dof, float(f0), sign)
-    assert best is not None
-    return best
+
+    def composite(k: int) -> CompositeFit:
+        sign, f0 = signs[k // len(grid)], grid[k % len(grid)]
+        design = base.copy()
+        design[:, 0] *= sign
+        design[:, 2] = flicker[:, k % len(grid)]
+        n_par = design.shape[1] + n_nonlinear + (cutoff_hz is None and np.isfinite(f0))
+        dof = max(len(idx) - int(n_par), 1)
+        return CompositeFit(names, coefs[k], design, idx, float(devs[k]), dof, float(f0), sign)
+
+    def lowest(ks: np.ndarray) -> int:  # the first of the least deviances (to 1e-9)
+        return int(ks[np.flatnonzero(devs[ks] < devs[ks].min() + 1e-9)[0]])
+
+    best = composite(lowest(np.arange(len(devs))))
+    possible = np.flatnonzero(coefs[:, 2] <= flicker_max)
+    if best.coef[2] <= flicker_max or not possible.size:
+        return best
+    # an adequate free fit keeps its B: a clean record whose correlated long-τ points dip by
+    # chance under the plateau (measured: the default 12 h simulation's accel_z, capped to 55 %
+    # of its true B with K inflated 30-fold and D/dof 240) is no impossible model; a misfit
+    # that inflates B (an unmodelled effect) is rejected and loses it
+    return best if best.p_value >= ADEQUATE_P else composite(lowest(possible))
 
 
 def fit_start(
@@ -654,7 +666,7 @@ class NoiseTerms:
         }
 
 
-def _adequacy(fit: CompositeFit, level: float = 0.001) -> str | None:
+def _adequacy(fit: CompositeFit, level: float = ADEQUATE_P) -> str | None:
     """Warning text when the model is rejected on its fitted range (P(χ²_dof ≥ D) < level)."""
     if fit.p_value >= level:
         return None
@@ -706,9 +718,11 @@ def terms_from_fit(
             terms[name] = NoiseTerm(None, None, None, unit, reason)
         elif lo > 0:
             # a resolved term's interval: the profile's; B's is also held to a possible plateau
-            # (others may lie above the curve where the negative prefilter term offsets them)
+            # (others may lie above the curve where the negative prefilter term offsets them),
+            # unless the fit kept a B above it because the data rejected the limit
+            # (:func:`fit_composite`)
             value = float(np.sqrt(fit.coef[j]))
-            if j == 2:
+            if j == 2 and fit.coef[j] <= caps[j]:
                 hi_profile = max(hi, float(fit.coef[j]))
             hi = float(np.sqrt(hi_profile))
             terms[name] = NoiseTerm(value, float(np.sqrt(lo)), hi, unit, misfit)
