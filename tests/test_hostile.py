@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_cli import in_process as cli  # tests/ is on sys.path (pytest prepend mode)
 
 from imupipe.api import default_out_dir
 from imupipe.cli import main, topic_folder
@@ -42,19 +43,6 @@ HOSTILE_TOPIC = (
     "\x1b[2J\x1b]0;owned\x07\u202e"
 )
 RAW = ("\x1b", "\x07", "\u202e", "\x00")
-
-
-def cli(args: list[str], capsys) -> tuple[int, str, str]:
-    """:func:`imupipe.cli.main` in process: exit code, stdout, stderr."""
-    old = sys.argv
-    sys.argv = ["imupipe", *args]
-    try:
-        with pytest.raises(SystemExit) as exit_info:
-            main()
-    finally:
-        sys.argv = old
-    captured = capsys.readouterr()
-    return exit_info.value.code, captured.out, captured.err
 
 
 def one_error_line(code: int, err: str, expected: str) -> None:

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
+from test_cli import in_process
 
 from imupipe.cli import main, topic_folder
 from imupipe.device.adis16364 import EA_BIT, FrameBlock, config_for_rate
@@ -203,15 +204,9 @@ def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> 
 
 
 def run_info(path: Path, capsys) -> str:
-    old = sys.argv
-    sys.argv = ["imupipe", "info", str(path)]
-    try:
-        with pytest.raises(SystemExit) as exit_info:
-            main()
-    finally:
-        sys.argv = old
-    assert exit_info.value.code == 0
-    return capsys.readouterr().out
+    code, out, _ = in_process(["info", str(path)], capsys)
+    assert code == 0
+    return out
 
 
 def test_killed_recorder_with_a_bad_crc_chunk(tmp_path: Path, capsys, clean: FrameBlock) -> None:
