@@ -17,6 +17,12 @@ from imupipe.errors import FleetError
 CONNECT_TIMEOUT_S = 10.0
 """How long to try reaching an existing scheduler before giving up (s)."""
 
+SINGLE_THREAD_ENV = {"NUMBA_NUM_THREADS": "1", "POLARS_MAX_THREADS": "1"}
+"""Set in every embedded worker process (Dask's nanny already sets OMP/MKL/OpenBLAS to one
+thread): the Allan and EDF kernels are numba ``prange`` loops and polars has its own pool, so an
+unpinned worker takes ~1.2 cores and two of them oversubscribe two cores.  One single-threaded
+worker per core is the fleet's unit of parallelism."""
+
 
 def scheduler_address(scheduler: str | None) -> str | None:
     """``scheduler``, else Dask's ``scheduler-address`` setting (``DASK_SCHEDULER_ADDRESS``)."""
@@ -29,8 +35,8 @@ def fleet_client(scheduler: str | None = None, workers: int | None = None) -> It
 
     Without an address: a ``LocalCluster`` of ``workers`` processes (default one per core the
     process may use: ``dask.system.CPU_COUNT`` honours CPU affinity and cgroup quotas), one
-    thread each (the analysis' numba kernels are single-threaded and the GIL is held in parts
-    of it), every server bound to 127.0.0.1 (the scheduler's HTTP routes on a free port rather
+    thread each and its numba and polars pools pinned to one thread (``SINGLE_THREAD_ENV``),
+    every server bound to 127.0.0.1 (the scheduler's HTTP routes on a free port rather
     than 8787), stopped on exit.  With an address: a client of that
     scheduler; ``workers`` then means "wait until that many workers have joined".
 
@@ -52,6 +58,7 @@ def fleet_client(scheduler: str | None = None, workers: int | None = None) -> It
                 # a worker's heartbeat racing the scheduler's shutdown logs an ERROR with a
                 # traceback on the user's terminal; every unit's failure is in the fleet report
                 silence_logs=logging.CRITICAL,
+                env=SINGLE_THREAD_ENV,
             ) as cluster,
             Client(cluster) as client,
         ):
