@@ -45,13 +45,16 @@ ROOT = Path(__file__).resolve().parents[1]
 TESTS: dict[str, tuple[str, ...]] = {
     "pipeline/units.py": ("tests/test_units.py",),
     "pipeline/vocab.py": ("tests/test_units.py", "tests/test_import_floors.py"),
-    "pipeline/stats/allan.py": ("tests/test_allan.py",),
-    "pipeline/stats/edf.py": ("tests/test_edf.py",),
-    "pipeline/stats/robust.py": ("tests/test_robust.py",),
-    "pipeline/analysis/condition.py": ("tests/test_condition.py",),
-    "pipeline/io/decode.py": ("tests/test_scale_factors.py", "tests/test_ros_bags.py"),
-    "pipeline/recording/recorder.py": ("tests/test_mcap_io.py", "tests/test_recorder_signals.py"),
-    "pipeline/report/report.py": ("tests/test_report.py",),
+    "pipeline/stats/allan.py": ("tests/stats/test_allan.py",),
+    "pipeline/stats/edf.py": ("tests/stats/test_edf.py",),
+    "pipeline/stats/robust.py": ("tests/stats/test_robust.py",),
+    "pipeline/analysis/condition.py": ("tests/analysis/test_condition.py",),
+    "pipeline/io/decode.py": ("tests/io/test_scale_factors.py", "tests/io/test_ros_bags.py"),
+    "pipeline/recording/recorder.py": (
+        "tests/io/test_mcap_io.py",
+        "tests/recording/test_recorder_signals.py",
+    ),
+    "pipeline/report/report.py": ("tests/report/test_report.py",),
 }
 
 

@@ -9,7 +9,7 @@ with the curve), the loop's error before → after and where the fit starts and 
 
     python benchmarks/real_final_model.py [reference_dir] [--write-test-data tests/data/F.json]
 
-``--write-test-data`` stores the few numbers tests/test_final_model.py needs: per axis the
+``--write-test-data`` stores the few numbers tests/analysis/test_final_model.py needs: per axis the
 Allan curve (tau, adev, edf; adev after the loop's corrections) to 7 digits and the final
 model's terms, as report.json states them.
 """

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imupipe.cli import main
 from imupipe.device.adis16364 import FrameBlock, config_for_rate
 from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.recording.recorder import FrameWriter
@@ -78,19 +77,6 @@ def imupipe(*args: str) -> subprocess.Popen:
 SUBPROCESS = {"missing", "random", "no_imu", "one_frame"}
 
 
-def in_process(args: list[str], capsys) -> tuple[int, str, str]:
-    """:func:`imupipe.cli.main` with ``args``: exit code, stdout, stderr."""
-    old = sys.argv
-    sys.argv = ["imupipe", *args]
-    try:
-        with pytest.raises(SystemExit) as exit_info:
-            main()
-    finally:
-        sys.argv = old
-    captured = capsys.readouterr()
-    return exit_info.value.code, captured.out, captured.err
-
-
 @pytest.fixture(scope="module")
 def workdir(tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("cli")
@@ -131,9 +117,9 @@ def runs(workdir: Path, cases) -> dict[str, tuple[int, str, str]]:
         *("info_missing", "info_text"),
     ],
 )
-def test_bad_input_exits_2_with_one_line(runs, cases, capsys, case: str) -> None:
+def test_bad_input_exits_2_with_one_line(runs, cases, case: str, cli) -> None:
     args, expected = cases[case]
-    code, stdout, stderr = runs[case] if case in SUBPROCESS else in_process(args, capsys)
+    code, stdout, stderr = runs[case] if case in SUBPROCESS else cli(args)
     assert code == 2, stderr
     assert "Traceback" not in stderr
     lines = stderr.splitlines()

@@ -23,7 +23,6 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_cli import in_process as cli  # tests/ is on sys.path (pytest prepend mode)
 
 from imupipe.api import default_out_dir
 from imupipe.cli import main, topic_folder
@@ -68,9 +67,9 @@ def write_adis(path: Path, config=CONFIG, n: int = 3000, seed: int = 1) -> Path:
 # --- 1. injection: terminal and Markdown ---------------------------------------------------
 
 
-def test_a_newline_in_a_topic_cannot_forge_an_error_line(tmp_path: Path, capsys) -> None:
+def test_a_newline_in_a_topic_cannot_forge_an_error_line(tmp_path: Path, cli) -> None:
     path = hm.imu_file(tmp_path / "f.mcap", topics=(HOSTILE_TOPIC, "/imu/data"))
-    code, out, err = cli(analyze_args(path, tmp_path / "out"), capsys)
+    code, out, err = cli(analyze_args(path, tmp_path / "out"))
     one_error_line(code, err, "several IMU topics, choose one with --topic")
     assert "\\n# Injected\\nimupipe: error: forged" in err  # shown, escaped, on the one line
     assert not any(c in err + out for c in RAW)
@@ -136,12 +135,10 @@ def test_topic_folders_are_injective_and_stay_inside_out(tmp_path: Path) -> None
     assert topic_folder("/imu0/data_raw") == "imu0.data_raw"
 
 
-def test_topic_all_with_hostile_names_writes_every_report_inside_out(
-    tmp_path: Path, capsys
-) -> None:
+def test_topic_all_with_hostile_names_writes_every_report_inside_out(tmp_path: Path, cli) -> None:
     topics = ("..", "/a/b", "/a_b", "/imu\x00nul", "/" + "x" * 300)
     path = hm.imu_file(tmp_path / "f.mcap", n=2000, topics=topics)
-    code, _, err = cli(analyze_args(path, tmp_path / "out", "--topic", "all"), capsys)
+    code, _, err = cli(analyze_args(path, tmp_path / "out", "--topic", "all"))
     assert code == 0, err
     reports = sorted((tmp_path / "out").glob("*/report.json"))
     assert len(reports) == len(topics)
@@ -152,7 +149,7 @@ def test_topic_all_with_hostile_names_writes_every_report_inside_out(
 
 @pytest.mark.parametrize("where", ["parent", "absolute"])
 def test_rosbag2_metadata_listing_files_outside_the_bag_is_refused(
-    tmp_path: Path, capsys, where: str
+    tmp_path: Path, where: str, cli
 ) -> None:
     outside = hm.imu_file(tmp_path / "outside.mcap")
     bag = tmp_path / "bag"
@@ -164,7 +161,7 @@ def test_rosbag2_metadata_listing_files_outside_the_bag_is_refused(
     )
     with pytest.raises(InputError, match="outside the bag directory; refusing"):
         decode(bag)
-    code, _, err = cli(["info", str(bag)], capsys)
+    code, _, err = cli(["info", str(bag)])
     one_error_line(code, err, "outside the bag directory")
 
 
@@ -248,12 +245,12 @@ def test_a_header_claiming_a_terabyte_gives_no_message_count(tmp_path: Path, cut
 # --- 5. split bag with two devices, 7. rosbag2 directories ---------------------------------
 
 
-def test_split_files_with_different_device_metadata_are_refused(tmp_path: Path, capsys) -> None:
+def test_split_files_with_different_device_metadata_are_refused(tmp_path: Path, cli) -> None:
     bag = tmp_path / "bag"
     bag.mkdir()
     write_adis(bag / "bag_0.mcap")
     write_adis(bag / "bag_1.mcap", dataclasses.replace(CONFIG, sens_avg=0x0202), seed=2)
-    code, _, err = cli(analyze_args(bag, tmp_path / "out"), capsys)
+    code, _, err = cli(analyze_args(bag, tmp_path / "out"))
     one_error_line(code, err, "bag_1.mcap carries different 'adis16364' metadata")
     assert "gyro_range_dps" in err and "sens_avg" in err
 
@@ -301,21 +298,21 @@ def test_a_fifo_named_mcap_is_refused_not_waited_on(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("kind", ["folder", "dangling link"])
-def test_a_split_file_that_is_no_file_exits_2(tmp_path: Path, capsys, kind: str) -> None:
+def test_a_split_file_that_is_no_file_exits_2(tmp_path: Path, kind: str, cli) -> None:
     bag = split_bag(tmp_path / "bag", 2)
     if kind == "folder":
         (bag / "bag_2.mcap").mkdir()
     else:
         (bag / "bag_2.mcap").symlink_to(tmp_path / "gone.mcap")
-    code, _, err = cli(["info", str(bag)], capsys)
+    code, _, err = cli(["info", str(bag)])
     one_error_line(code, err, "bag_2.mcap: not a regular file")
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root reads a file without read permission")
-def test_an_unreadable_split_file_exits_2(tmp_path: Path, capsys) -> None:
+def test_an_unreadable_split_file_exits_2(tmp_path: Path, cli) -> None:
     bag = split_bag(tmp_path / "bag", 2)
     (bag / "bag_1.mcap").chmod(0)
-    code, _, err = cli(["info", str(bag)], capsys)
+    code, _, err = cli(["info", str(bag)])
     one_error_line(code, err, "bag_1.mcap: cannot be read")
 
 
@@ -331,7 +328,7 @@ def partial_folders(out: Path) -> list[Path]:
 
 
 def test_interrupted_runs_leave_the_old_output_and_no_rrd_leaves_no_stale_recording(
-    tmp_path: Path, capsys
+    tmp_path: Path, cli
 ) -> None:
     """Item 6 (and 9: Ctrl-C says ``imupipe: interrupted``): a second analysis into the same
     --out, stopped by SIGINT, SIGTERM or SIGKILL while it runs, leaves the first one's files
@@ -339,7 +336,7 @@ def test_interrupted_runs_leave_the_old_output_and_no_rrd_leaves_no_stale_record
     first = hm.imu_file(tmp_path / "a.mcap", n=6000)
     second = hm.imu_file(tmp_path / "b.mcap", n=5000, rate_hz=50.0)
     out = tmp_path / "out"
-    code, _, err = cli(["analyze", str(first), "--out", str(out), "--no-loop", "-q"], capsys)
+    code, _, err = cli(["analyze", str(first), "--out", str(out), "--no-loop", "-q"])
     assert code == 0, err
     old = snapshot(out)
     assert "recording.rrd" in old
@@ -365,14 +362,14 @@ def test_interrupted_runs_leave_the_old_output_and_no_rrd_leaves_no_stale_record
         assert (proc.returncode, stderr) == (code, message), stderr
         assert snapshot(out) == old
         assert len(partial_folders(out)) == (signum == signal.SIGKILL)
-    code, _, err = cli(analyze_args(second, out), capsys)  # --no-rrd, to completion
+    code, _, err = cli(analyze_args(second, out))  # --no-rrd, to completion
     assert code == 0, err
     assert "recording.rrd" not in snapshot(out)
     assert json.loads((out / "report.json").read_text())["input"]["frames"] == 5000
     assert partial_folders(out) == []  # the killed run's leftovers are gone too
 
 
-def test_default_out_names_do_not_collide(tmp_path: Path, monkeypatch, capsys) -> None:
+def test_default_out_names_do_not_collide(tmp_path: Path, monkeypatch, cli) -> None:
     assert default_out_dir(tmp_path / "calib.day1") != default_out_dir(tmp_path / "calib.day2")
     assert default_out_dir(tmp_path / "calib.day1").name == "calib.day1.imupipe"
     assert default_out_dir(tmp_path / "run.mcap").name == "run.imupipe"
@@ -380,7 +377,7 @@ def test_default_out_names_do_not_collide(tmp_path: Path, monkeypatch, capsys) -
     bag.mkdir()
     hm.imu_file(bag / "f.mcap")
     monkeypatch.chdir(bag)
-    code, _, err = cli(["analyze", ".", "--no-rrd", "--no-loop", "-q"], capsys)
+    code, _, err = cli(["analyze", ".", "--no-rrd", "--no-loop", "-q"])
     assert code == 0, err  # item 8: `analyze .`
     assert (tmp_path / "bag.imupipe" / "report.json").is_file()
 
@@ -402,10 +399,10 @@ def out_cases(d: Path) -> dict[str, tuple[Path, str]]:
 
 
 @pytest.mark.parametrize("case", ["existing file", "dangling link", "unwritable", "foreign folder"])
-def test_an_out_that_cannot_take_the_reports_is_one_line(tmp_path: Path, capsys, case) -> None:
+def test_an_out_that_cannot_take_the_reports_is_one_line(tmp_path: Path, case, cli) -> None:
     out, expected = out_cases(tmp_path)[case]
     path = hm.imu_file(tmp_path / "f.mcap")
-    code, _, err = cli(analyze_args(path, out), capsys)
+    code, _, err = cli(analyze_args(path, out))
     one_error_line(code, err, expected)
     assert (tmp_path / "notes" / "thesis.tex").read_text() == "do not delete"
 
@@ -432,18 +429,18 @@ def scaled_imu(path: Path, factor: float, alternate: bool = False, glitch: bool 
     ("factor", "expected"),
     [(1e200, "beyond what float64 Allan sums hold"), (1e-310, "below what float64 Allan sums")],
 )
-def test_values_float64_cannot_square_are_one_line(tmp_path: Path, capsys, factor, expected):
+def test_values_float64_cannot_square_are_one_line(tmp_path: Path, factor, expected, cli):
     path = scaled_imu(tmp_path / "f.mcap", factor)
-    code, _, err = cli(analyze_args(path, tmp_path / "out"), capsys)
+    code, _, err = cli(analyze_args(path, tmp_path / "out"))
     one_error_line(code, err, "no axis can be analysed: gyro_x ")
     assert expected in err
 
 
-def test_an_alternating_lsb_and_a_glitch_are_not_fitted(tmp_path: Path, capsys) -> None:
+def test_an_alternating_lsb_and_a_glitch_are_not_fitted(tmp_path: Path, cli) -> None:
     """Items 8 and 11: a channel flipping 0/1 LSB and a constant channel with one glitch get
     no fitted N (they are treated like a stuck channel); the other axes are analysed."""
     path = scaled_imu(tmp_path / "f.mcap", 1.0, alternate=True, glitch=True)
-    code, _, err = cli(analyze_args(path, tmp_path / "out"), capsys)
+    code, _, err = cli(analyze_args(path, tmp_path / "out"))
     assert code == 0 and "Traceback" not in err and "RuntimeWarning" not in err, err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     warnings = report["input"]["warnings"]
@@ -456,14 +453,14 @@ def test_an_alternating_lsb_and_a_glitch_are_not_fitted(tmp_path: Path, capsys) 
 
 
 @pytest.mark.parametrize("rate", ["0", "-100", "inf"])
-def test_device_metadata_with_an_impossible_rate_is_one_line(tmp_path: Path, capsys, rate):
+def test_device_metadata_with_an_impossible_rate_is_one_line(tmp_path: Path, rate, cli):
     path = tmp_path / "f.mcap"
     write_adis(path, dataclasses.replace(CONFIG, output_rate_hz=float(rate)))
-    code, _, err = cli(analyze_args(path, tmp_path / "out"), capsys)
+    code, _, err = cli(analyze_args(path, tmp_path / "out"))
     one_error_line(code, err, f"output_rate_hz {float(rate)} is not a positive rate")
 
 
-def test_one_topic_with_two_message_types_is_one_line(tmp_path: Path, capsys) -> None:
+def test_one_topic_with_two_message_types_is_one_line(tmp_path: Path, cli) -> None:
     path = tmp_path / "f.mcap"
     log = hm.T0_NS + np.arange(100, dtype=np.int64) * 10_000_000
     with open(path, "wb") as f:
@@ -473,7 +470,7 @@ def test_one_topic_with_two_message_types_is_one_line(tmp_path: Path, capsys) ->
         w.write_chunk(imu, log, imu_payloads(log, np.zeros((100, 3)), np.zeros((100, 3))))
         w.write_chunk(adis, log, np.zeros((100, 64), np.uint8))
         w.finish()
-    code, _, err = cli(analyze_args(path, tmp_path / "out"), capsys)
+    code, _, err = cli(analyze_args(path, tmp_path / "out"))
     one_error_line(code, err, "topic '/imu' carries two message types (imu and adis16364)")
 
 
@@ -483,9 +480,9 @@ def test_one_topic_with_two_message_types_is_one_line(tmp_path: Path, capsys) ->
         (["--memory-budget-gb", "inf"], "--memory-budget-gb must be a finite number"),
     ],
 )
-def test_analyze_options_that_are_not_finite_are_one_line(tmp_path, capsys, args, expected):
+def test_analyze_options_that_are_not_finite_are_one_line(tmp_path, args, expected, cli):
     path = hm.imu_file(tmp_path / "f.mcap", n=100)
-    code, _, err = cli(analyze_args(path, tmp_path / "out", *args), capsys)
+    code, _, err = cli(analyze_args(path, tmp_path / "out", *args))
     one_error_line(code, err, expected)
 
 
@@ -498,9 +495,9 @@ def test_analyze_options_that_are_not_finite_are_one_line(tmp_path, capsys, args
         (["--duration", "1s", "--truth", "."], "--truth . is a folder"),
     ],
 )
-def test_record_options_that_make_no_recording_are_one_line(tmp_path, capsys, args, expected):
+def test_record_options_that_make_no_recording_are_one_line(tmp_path, args, expected, cli):
     out = tmp_path / "r.mcap"
-    code, _, err = cli(["record", "-o", str(out), "-q", *args], capsys)
+    code, _, err = cli(["record", "-o", str(out), "-q", *args])
     one_error_line(code, err, expected)
 
 
@@ -528,12 +525,12 @@ def imu_with_temperature(path: Path, temperature_topic: str, frame: bytes = b"ba
     return path
 
 
-def test_a_temperature_topic_of_another_device_is_not_the_imus(tmp_path: Path, capsys) -> None:
+def test_a_temperature_topic_of_another_device_is_not_the_imus(tmp_path: Path, cli) -> None:
     rec = decode(imu_with_temperature(tmp_path / "a.mcap", "/battery/temperature"))
     assert rec.frames["temp_c"].null_count() == 3000  # 31.5 °C of the battery is not used
     assert rec.temperature_topic is None
     path = imu_with_temperature(tmp_path / "b.mcap", "/imu/temperature")
-    code, _, err = cli(analyze_args(path, tmp_path / "out"), capsys)
+    code, _, err = cli(analyze_args(path, tmp_path / "out"))
     assert code == 0, err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["input"]["temperature_topic"] == "/imu/temperature"
@@ -568,7 +565,7 @@ hostile_text = st.text(
 )
 @given(st.lists(pieces, min_size=1, max_size=3), hostile_text, st.booleans())
 def test_structurally_hostile_mcap_is_exit_2_or_a_warning(
-    tmp_path: Path, capsys, parts, topic: str, cut: bool
+    tmp_path: Path, parts, topic: str, cut: bool, cli
 ) -> None:
     """Nested chunks, bombs beyond the budget, chunks lying about their size, headers claiming
     absurd sizes, a cut tail, a hostile topic: ``imupipe analyze`` exits 0 with a warning for
@@ -599,7 +596,7 @@ def test_structurally_hostile_mcap_is_exit_2_or_a_warning(
         f.write("5")  # VmHWM := VmRSS
     before = _status("VmRSS:")
     code, stdout, err = cli(
-        analyze_args(path, out, "--memory-budget-gb", str(BUDGET_GB), "--topic", topic), capsys
+        analyze_args(path, out, "--memory-budget-gb", str(BUDGET_GB), "--topic", topic)
     )
     assert _status("VmHWM:") - before < BUDGET_GB * 1e9
     assert "Traceback" not in err and "internal error" not in err
@@ -614,7 +611,7 @@ def test_structurally_hostile_mcap_is_exit_2_or_a_warning(
 # --- 11. a rate switching from 200 to 100 Hz -----------------------------------------------
 
 
-def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, capsys) -> None:
+def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, cli) -> None:
     """White noise of N = 1e-3 rad/s/√Hz, 24000 frames at 200 Hz then 16000 at 100 Hz: the
     200 Hz part is analysed alone and N comes out right (as one series it was ~10 % low)."""
     fast, slow = 24_000, 16_000
@@ -631,7 +628,7 @@ def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, capsys) -
         cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
         w.write_chunk(cid, log, imu_payloads(log, white[:, :3], white[:, 3:]))
         w.finish()
-    code, _, err = cli(analyze_args(path, tmp_path / "out"), capsys)
+    code, _, err = cli(analyze_args(path, tmp_path / "out"))
     assert code == 0, err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["input"]["rate_hz"] == pytest.approx(200.0, rel=1e-9)
@@ -646,7 +643,7 @@ def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, capsys) -
         assert n_fit == pytest.approx(1e-3, rel=0.03)
 
 
-def test_a_temperature_topic_by_frame_id_or_by_choice(tmp_path: Path, capsys) -> None:
+def test_a_temperature_topic_by_frame_id_or_by_choice(tmp_path: Path, cli) -> None:
     """Item 10: a Temperature topic elsewhere but with the IMU's frame_id is the IMU's; any
     other is used only when named by --temperature-topic; a wrong name is one line."""
     rec = decode(imu_with_temperature(tmp_path / "a.mcap", "/sensors/temp", frame=b"imu"))
@@ -654,10 +651,10 @@ def test_a_temperature_topic_by_frame_id_or_by_choice(tmp_path: Path, capsys) ->
     assert rec.frames["temp_c"].to_numpy() == pytest.approx(31.5)
     path = imu_with_temperature(tmp_path / "b.mcap", "/battery/temperature")
     args = analyze_args(path, tmp_path / "out", "--temperature-topic", "/battery/temperature")
-    code, _, err = cli(args, capsys)
+    code, _, err = cli(args)
     assert code == 0, err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["input"]["temperature_topic"] == "/battery/temperature"
-    code, _, err = cli(analyze_args(path, tmp_path / "o2", "--temperature-topic", "/no"), capsys)
+    code, _, err = cli(analyze_args(path, tmp_path / "o2", "--temperature-topic", "/no"))
     one_error_line(code, err, "--temperature-topic '/no' is not a Temperature topic")
     assert "(Temperature topics: /battery/temperature)" in err

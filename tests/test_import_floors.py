@@ -118,3 +118,24 @@ def test_the_floor_check_sees_a_violation(tmp_path: Path) -> None:
     found = imported(source, "imupipe.stats.x")
     assert found == {"imupipe.report.report", "imupipe.analysis.condition"}
     assert module.exists()
+
+
+TESTS = Path(__file__).resolve().parent
+
+
+def test_tests_mirror_the_package_tree_and_share_fixtures_not_imports() -> None:
+    """tests/<stage>/ exists only for a sub-package of imupipe; builders shared by several test
+    files are conftest fixtures, so no test module imports another."""
+    stages = {p.name for p in ROOT.iterdir() if (p / "__init__.py").exists()}
+    folders = {p.name for p in TESTS.iterdir() if p.is_dir() and any(p.glob("test_*.py"))}
+    assert folders <= stages, folders - stages
+    assert {"stats", "model", "io", "analysis", "report"} <= folders
+    for path in TESTS.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            bad = [n for n in names if n.split(".")[0].startswith(("test_", "conftest", "tests"))]
+            assert not bad, f"{path.relative_to(TESTS)} imports {bad}"

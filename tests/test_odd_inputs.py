@@ -21,7 +21,6 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
-from test_cli import in_process
 
 from imupipe.cli import main, topic_folder
 from imupipe.device.adis16364 import EA_BIT, FrameBlock, config_for_rate
@@ -203,13 +202,15 @@ def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> 
         assert report["input"]["topic"] == topic and report["input"]["frames"] == 3000
 
 
-def run_info(path: Path, capsys) -> str:
-    code, out, _ = in_process(["info", str(path)], capsys)
+def run_info(path: Path, cli) -> str:
+    code, out, _ = cli(["info", str(path)])
     assert code == 0
     return out
 
 
-def test_killed_recorder_with_a_bad_crc_chunk(tmp_path: Path, capsys, clean: FrameBlock) -> None:
+def test_killed_recorder_with_a_bad_crc_chunk(
+    tmp_path: Path, capsys, clean: FrameBlock, cli
+) -> None:
     path = write_adis(tmp_path / "f.mcap", clean, chunk=3000, compression="")
     data = bytearray(path.read_bytes())
     with open(path, "rb") as f:
@@ -228,7 +229,7 @@ def test_killed_recorder_with_a_bad_crc_chunk(tmp_path: Path, capsys, clean: Fra
     assert "file has no footer/summary" in w
     assert "1 gap(s) in time or frame counter (3000 frames missing)" in w
     assert [s["frames"] for s in report["input"]["segments"]] == [3000, 3000]
-    info = run_info(path, capsys)
+    info = run_info(path, cli)
     for reason in ("CRC mismatch", "cut off by the end of the file"):
         assert "warning: " + lost.format(reason) in info
     assert "6000 messages" in info

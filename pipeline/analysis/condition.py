@@ -292,16 +292,34 @@ def _grid_places(
 
     A row's step from its predecessor is the counter's step (modulo 2**32) where that agrees
     with the stamp step rounded to periods within one sample (or 1 %), else the stamp step
-    (at least 1).  Uncertain: a zero or negative stamp step, or a counter that disagrees."""
+    (at least 1).  One wrong stamp breaks two steps, into its row and out of it: where a step
+    disagrees but the span over it and a neighbouring bad step (stamp not increasing, or
+    disagreeing) agrees with the counter's two steps, the counter places the row, so the grid
+    does not shift.  Uncertain: a zero or negative stamp step, a counter that disagrees, or the
+    row whose own stamp was the wrong one."""
     d = np.diff(t)
     step = np.maximum(np.rint(d / period), 1).astype(np.int64)
     uncertain = np.concatenate(([False], d <= 0))
     if counter is not None:
         by_counter = np.diff(counter.astype(np.uint32)).astype(np.int64)
-        agree = (by_counter >= 1) & (np.abs(by_counter - step) <= np.maximum(1, step // 100))
-        step = np.where(agree, by_counter, step)
-        uncertain[1:] |= ~agree
+        agree = (by_counter >= 1) & _within(by_counter, step)
+        bad = (d <= 0) | ~agree
+        span_t = np.rint((t[2:] - t[:-2]) / period).astype(np.int64)
+        span_ok = (
+            (by_counter[1:] >= 1)
+            & (by_counter[:-1] >= 1)
+            & _within(by_counter[1:] + by_counter[:-1], span_t)
+        )
+        after_bad = np.concatenate(([False], ~agree[1:] & bad[:-1] & span_ok))
+        before_bad = np.concatenate((~agree[:-1] & bad[1:] & span_ok, [False]))
+        step = np.where(agree | after_bad | before_bad, by_counter, step)
+        uncertain[1:] |= ~(agree | after_bad)  # a row bridged to the next has the wrong stamp
     return np.concatenate(([0], np.cumsum(step))), uncertain
+
+
+def _within(by_counter: np.ndarray, by_stamps: np.ndarray) -> np.ndarray:
+    """Counter steps that agree with stamp steps (both in periods) within one sample or 1 %."""
+    return np.abs(by_counter - by_stamps) <= np.maximum(1, by_stamps // 100)
 
 
 def _mask_warning(series_samples: int, excluded: int, n: int) -> str:

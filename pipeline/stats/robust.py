@@ -6,7 +6,7 @@ makes three more; on a 24 h / 1 kHz record (86.4 M samples, 691 MB a copy) those
 dominate the memory of an analysis.  Here the order statistics are selected by repeated
 histogramming of the values in a shrinking range: each pass reads the series once, forms each
 value on the fly (x_i, or x_{i+1} − x_i, optionally as |v − centre|) and allocates only
-:data:`SELECT_BINS` bins.  The results equal numpy's bit for bit (tests/test_robust.py).
+:data:`SELECT_BINS` bins.  The results equal numpy's bit for bit (tests/stats/test_robust.py).
 """
 
 from __future__ import annotations

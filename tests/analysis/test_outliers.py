@@ -19,7 +19,9 @@ from imupipe.model import effects
 from imupipe.stats import robust
 from imupipe.stats.allan import allan_curves, oadev
 
-FACTS = json.loads((Path(__file__).parent / "data" / "real_outlier_facts.json").read_text())
+FACTS = json.loads(
+    (Path(__file__).resolve().parents[1] / "data" / "real_outlier_facts.json").read_text()
+)
 LSB = 0.00333 * 9.80665  # ADIS16405 accelerometer, m/s^2 per count
 TAU0 = 0.01
 

@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rerun as rr
-from test_rerun_view import _chunk_lines, _chunks
 
 from imupipe.api import record as api_record
 from imupipe.device.adis16364 import config_for_rate
@@ -26,17 +25,19 @@ CONFIG = config_for_rate(100.0)
 FRAMES = 40_000  # three recorder chunks: 16384 + 16384 + 7232
 
 
-def test_live_view_streams_every_frame_and_redraws_the_allan_views(tmp_path: Path) -> None:
+def test_live_view_streams_every_frame_and_redraws_the_allan_views(
+    tmp_path: Path, rrd_chunks
+) -> None:
     rec = rr.RecordingStream("imupipe", make_default=False, make_thread_default=False)
     rec.save(tmp_path / "live.rrd")
     live = LiveView(VirtualADIS16364(CONFIG, None, seed=3), rec, adev_period_s=0.0)
     summary = record(tmp_path / "run.mcap", live, FRAMES)
     live.finish()
     assert summary.frames == FRAMES
-    chunks = _chunks(tmp_path / "live.rrd")
+    chunks = rrd_chunks.rows(tmp_path / "live.rrd")
     for plot in ("gyro", "accel", "temperature", "supply"):
         assert chunks[f"/signals/{plot}"] == FRAMES  # every frame, live
-    lines = _chunk_lines(tmp_path / "live.rrd")
+    lines = rrd_chunks.lines(tmp_path / "live.rrd")
     redraws = [e for e, _, _ in lines if e == "/allan/gyro/gyro_x/adev"]
     assert (
         len(redraws) >= 2

@@ -2,173 +2,18 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import math
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import polars as pl
 import pytest
-from scipy.stats import chi2
 
-from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
-from imupipe.device.frame_schema import SCHEMA_NAME
-from imupipe.model import ieee952
-from imupipe.model.loop import AcceptedEffect, Goodness, RejectedCandidate
+from imupipe.analysis.results import AnalysisResult
 from imupipe.report.report import format_table, kalibr_yaml, write_report
-from imupipe.stats import allan
-from imupipe.units import SI_UNIT, from_si, to_si
+from imupipe.units import from_si, to_si
 
-SCHEMA = Path(__file__).resolve().parents[1] / "schemas" / "report.schema.json"
-RATE_HZ = 100.0
-FRAMES = 4_320_000
-CONFIDENCE = 0.683
-FLICKER_PLATEAU = math.sqrt(2 * math.log(2) / math.pi)
-# Paper (section 4) values used as the synthetic truth: N and B per axis, in the paper's units.
-TRUTH = {
-    "gyro_x": (0.05, "°/√s", 0.008, "°/s"),
-    "gyro_y": (0.05, "°/√s", 0.008, "°/s"),
-    "gyro_z": (0.05, "°/√s", 0.008, "°/s"),
-    "accel_x": (0.29, "mg/√s", 0.107, "mg"),
-    "accel_y": (0.27, "mg/√s", 0.161, "mg"),
-    "accel_z": (0.28, "mg/√s", 0.135, "mg"),
-}
-K_GYRO_X = 2e-6  # rad/s²/√Hz, resolved on gyro_x only; the other axes report K as null
-
-
-def _curve(n: float, b: float, k: float) -> object:
-    """An AllanCurve from the IEEE 952 model sqrt(N²/τ + (0.664 B)² + K² τ/3) with chi-square
-    intervals for a rough EDF (enough for reporting; the real EDF is the allan module's job)."""
-    m = np.unique(np.round(np.logspace(0, math.log10(FRAMES / 10), 60)).astype(np.int64))
-    tau = m / RATE_HZ
-    adev = np.sqrt(n**2 / tau + (FLICKER_PLATEAU * b) ** 2 + k**2 * tau / 3)
-    n_terms = FRAMES - 2 * m
-    edf = np.maximum(n_terms / m, 1.0)
-    edf[-1] = np.nan  # one unresolved interval: must come out as null
-    p = (1 - CONFIDENCE) / 2
-    lo = adev * np.sqrt(edf / chi2.ppf(1 - p, edf))
-    hi = adev * np.sqrt(edf / chi2.ppf(p, edf))
-    return allan.AllanCurve(
-        tau_s=tau,
-        adev=adev,
-        adev_lo=lo,
-        adev_hi=hi,
-        edf=edf,
-        n_terms=n_terms,
-        alpha=np.zeros_like(tau),
-        confidence=CONFIDENCE,
-    )
-
-
-def _term(value: float | None, unit: str, rel: float = 0.02, reason: str | None = None):
-    if value is None:
-        return ieee952.NoiseTerm(None, None, None, unit, reason)
-    return ieee952.NoiseTerm(value, value * (1 - rel), value * (1 + rel), unit, None)
-
-
-def _terms(sensor: str, n: float, b: float, k: float | None):
-    units = SI_UNIT[sensor]
-    return ieee952.NoiseTerms(
-        quantization=_term(None, units["quantization"], reason="below tau0"),
-        random_walk=_term(n, units["random_walk"]),
-        bias_instability=_term(b, units["bias_instability"]),
-        rate_random_walk=_term(k, units["rate_random_walk"], reason="recording too short"),
-        rate_ramp=_term(None, units["rate_ramp"], reason="recording too short"),
-    )
-
-
-@dataclass
-class StandInLoop:
-    """Duck-typed stand-in for imupipe.model.loop.LoopResult (its contract, issue 4)."""
-
-    terms_before: object
-    terms_after: object
-    adev_after: np.ndarray
-    model_adev_before: np.ndarray
-    model_adev_after: np.ndarray
-    z_before: np.ndarray
-    z_after: np.ndarray
-    accepted: list[AcceptedEffect] = field(default_factory=list)
-    rejected: list[RejectedCandidate] = field(
-        default_factory=lambda: [RejectedCandidate("sinusoid", {}, {}, {}, "ΔBIC 2.1 < 10")]
-    )
-    before: Goodness | None = None
-
-    def as_model_dict(self) -> dict:
-        return {
-            "terms": {
-                "white": {"value": 2.8e-3, "lo": 2.7e-3, "hi": 2.9e-3, "unit": "m/s^2/sqrt(Hz)"},
-            },
-            "error_before": 4.2,
-            "error_after": 1.03,
-            "dof": 40,
-            "p_value_before": 0.0,
-            "p_value_after": 0.41,
-            "rms_z_before": 3.1,
-            "rms_z_after": 0.9,
-            "max_abs_z_before": 5.9,
-            "max_abs_z_after": 2.2,
-            "tau_max_abs_z_before": 4000.0,
-            "tau_max_abs_z_after": 80.0,
-        }
-
-
-def synthetic_result(with_loop: bool = True) -> AnalysisResult:
-    """Six axes with the paper's N and B as truth; a loop result on accel_x."""
-    axes = {}
-    for name, (n, n_unit, b, b_unit) in TRUTH.items():
-        sensor = "gyro" if name.startswith("gyro") else "accel"
-        n_si, b_si = to_si(n, n_unit), to_si(b, b_unit)
-        k = K_GYRO_X if name == "gyro_x" else None
-        curve = _curve(n_si, b_si, k or 0.0)
-        axes[name] = AxisResult(
-            name=name,
-            sensor=sensor,
-            unit=SI_UNIT[sensor]["mean"],
-            mean=to_si(0.331, "°/s") if sensor == "gyro" else to_si(0.0273, "g"),
-            rms=to_si(0.52, "°/s") if sensor == "gyro" else to_si(3.0, "mg"),
-            curve=curve,
-            terms=_terms(sensor, n_si, b_si, k),
-        )
-    if with_loop:
-        ax = axes["accel_x"]
-        rng = np.random.default_rng(1)
-        z_before = rng.normal(0, 1, ax.curve.tau_s.size) + np.linspace(0, 5, ax.curve.tau_s.size)
-        effect = AcceptedEffect(
-            kind="temperature",
-            params={"coefficient": 1.2e-4},
-            intervals={"coefficient": [1.1e-4, 1.3e-4]},
-            evidence={"coherence": 0.9},
-            error_before=4.2,
-            error_after=1.03,
-        )
-        axes["accel_x"] = dataclasses.replace(
-            ax,
-            loop=StandInLoop(
-                terms_before=ax.terms,
-                terms_after=ax.terms,
-                adev_after=ax.curve.adev * 0.97,
-                model_adev_before=ax.curve.adev * 0.9,
-                model_adev_after=ax.curve.adev,
-                z_before=z_before,
-                z_after=rng.normal(0, 1, ax.curve.tau_s.size),
-                accepted=[effect],
-                before=Goodness(4.2, 168.0, 40, 0.0, z_before, 5.9, 4000.0, 3.1, 4),
-            ),
-        )
-    inp = InputSummary(
-        path="run.mcap",
-        topic="/imu/adis16364",
-        frames=FRAMES,
-        rate_hz=RATE_HZ,
-        duration_s=FRAMES / RATE_HZ,
-        segments=[{"start_s": 0.0, "end_s": FRAMES / RATE_HZ, "frames": FRAMES}],
-        warnings=["2 gaps; analysed the longest clean segment"],
-        source=SCHEMA_NAME,
-    )
-    return AnalysisResult(input=inp, axes=axes, device={"prod_id": "16364"})
+SCHEMA = Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json"
 
 
 def schema_errors(doc: object, schema: dict, root: dict, where: str = "$") -> list[str]:
@@ -211,7 +56,9 @@ def schema_errors(doc: object, schema: dict, root: dict, where: str = "$") -> li
 
 
 @pytest.fixture(scope="module")
-def written(tmp_path_factory: pytest.TempPathFactory) -> tuple[AnalysisResult, dict, Path]:
+def written(
+    tmp_path_factory: pytest.TempPathFactory, synthetic_result
+) -> tuple[AnalysisResult, dict, Path]:
     result = synthetic_result()
     out = tmp_path_factory.mktemp("report")
     doc = write_report(result, out, figures=True)
@@ -286,7 +133,7 @@ def test_terminal_table_is_in_paper_units(written) -> None:
     assert "4.2 → 1.03" in loop_line and "5.9 → 2.2 (τ 4000 → 80 s)" in loop_line
 
 
-def test_kalibr_yaml_uses_worst_axis_and_upper_bound_for_missing_k(written) -> None:
+def test_kalibr_yaml_uses_worst_axis_and_upper_bound_for_missing_k(written, stand_in_truth) -> None:
     result, _, out = written
     text = (out / "imu.yaml").read_text()
     assert text == kalibr_yaml(result)
@@ -303,12 +150,12 @@ def test_kalibr_yaml_uses_worst_axis_and_upper_bound_for_missing_k(written) -> N
     c = result.axes["gyro_y"].curve
     hi = np.where(np.isfinite(c.adev_hi), c.adev_hi, c.adev)
     bound = float(np.min(hi / np.sqrt(c.tau_s / 3)))
-    assert bound > K_GYRO_X
+    assert bound > stand_in_truth.k_gyro_x
     assert float(values["gyroscope_random_walk"]) == pytest.approx(bound, rel=1e-6)
     assert f"gyro_y: N {result.axes['gyro_y'].terms.random_walk.value:.6e}" in text
     how = "not resolved: upper bound from the Allan curve"
     assert f"K {bound:.6e} rad/s^2/sqrt(Hz) ({how})" in text
-    assert float(values["update_rate"]) == RATE_HZ
+    assert float(values["update_rate"]) == stand_in_truth.rate_hz
     assert values["rostopic"] == "/imu/adis16364"
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_ieee952 import B_TRUE, N_TRUE, synth_rate
 
 from imupipe.model.effects import CHI2_95
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
@@ -25,13 +24,19 @@ def run(y, temp=None, name="gyro_x"):
     return close_loop(AxisSignals(name, "gyro", y, TAU0, aux_block_means(temp, TAU0), None), curve)
 
 
-def base(seed):
-    rng = np.random.default_rng(seed)
-    return rng, synth_rate(N, TAU0, rng, N_TRUE, B_TRUE)
+@pytest.fixture
+def base(paper_gyro):
+    """``base(seed)``: (its generator, 3.6 h of the paper's gyro noise at 10 Hz)."""
+
+    def make(seed):
+        rng = np.random.default_rng(seed)
+        return rng, paper_gyro.rate(N, TAU0, rng)
+
+    return make
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_clean_axis_accepts_nothing(seed):
+def test_clean_axis_accepts_nothing(seed, base):
     rng, y = base(seed)
     res = run(y, temperature(N, rng))
     assert res.accepted == []
@@ -41,7 +46,7 @@ def test_clean_axis_accepts_nothing(seed):
     assert res.before.p_value > 0.01  # the baseline model is adequate on a clean axis
 
 
-def test_temperature_coupling_found_and_regressed_out():
+def test_temperature_coupling_found_and_regressed_out(base):
     rng, y = base(10)
     temp = temperature(N, rng)
     k_true = 4e-4  # rad/s per °C
@@ -56,7 +61,7 @@ def test_temperature_coupling_found_and_regressed_out():
     assert rise <= CHI2_95 * max(1.0, eff.error_before)
 
 
-def test_sinusoid_found_with_frequency_and_amplitude():
+def test_sinusoid_found_with_frequency_and_amplitude(base):
     _rng, y = base(11)
     f0, amp = 0.02, 3e-3
     t = np.arange(N) * TAU0

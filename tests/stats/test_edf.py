@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.stats import chi2
-from test_allan import nist_1000  # tests/ is on sys.path (pytest prepend import mode)
 
 from imupipe.stats.allan import allan_curves, phase
 from imupipe.stats.edf import (
@@ -26,23 +25,24 @@ from imupipe.stats.edf import (
     noise_ids,
 )
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
-def stable32_inputs() -> dict[str, tuple[np.ndarray, str]]:
+@pytest.fixture(scope="module")
+def stable32_inputs(nist_1000) -> dict[str, tuple[np.ndarray, str]]:
     """Rate samples (tau0 = 1 s) and table file for each Stable32 case."""
     arrays = np.load(DATA / "stable32_inputs.npz")
     keysight_phase = arrays["keysight_phase_1e14s"].astype(np.float64) / 1e14
     return {
-        "phasedat": (nist_1000(), "stable32_phasedat_oadev_octave.txt"),
+        "phasedat": (nist_1000, "stable32_phasedat_oadev_octave.txt"),
         "keysight": (np.diff(keysight_phase), "stable32_keysight53230a_tic_oadev.txt"),
         "pink": (arrays["pink_frequency"], "stable32_pink_oadev_octave.txt"),
     }
 
 
 @pytest.mark.parametrize("case", ["phasedat", "keysight", "pink"])
-def test_reproduces_stable32_table(case):
-    y, table_file = stable32_inputs()[case]
+def test_reproduces_stable32_table(case, stable32_inputs):
+    y, table_file = stable32_inputs[case]
     table = np.loadtxt(DATA / table_file, comments="#")
     m = table[:, 0].astype(np.int64)
     (curve,) = allan_curves(y, 1.0, m, confidence=0.683)
@@ -53,9 +53,9 @@ def test_reproduces_stable32_table(case):
     np.testing.assert_allclose(curve.adev_hi, table[:, 6], rtol=1e-3)
 
 
-def test_pink_table_exercises_every_identification_path():
+def test_pink_table_exercises_every_identification_path(stable32_inputs):
     """ACF (>= 30 points), B1 (10..29) and carry-over (< 10) all occur in the pink table."""
-    y, _ = stable32_inputs()["pink"]
+    y, _ = stable32_inputs["pink"]
     m = np.array([64, 512, 2048])
     assert [np.diff(phase(y, 1.0)[::k]).size for k in m] == [156, 19, 4]
     np.testing.assert_array_equal(noise_ids(phase(y, 1.0), m), [0, 0, 0])

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_lowmem import N, adis_recording, imu_bag, run
 
 import imupipe.analysis.analyze as analyze_module
 import imupipe.io.columns as columns_module
@@ -29,19 +28,19 @@ from imupipe.vocab import AXES
 QUIET = StageProgress(quiet=True)
 
 
-@pytest.mark.parametrize("make", [adis_recording, imu_bag])
-def test_decoded_frame_has_the_declared_schema(tmp_path: Path, make) -> None:
-    rec = decode(make(tmp_path / "in.mcap"))
+@pytest.mark.parametrize("kind", ["adis", "ros"])
+def test_decoded_frame_has_the_declared_schema(tmp_path: Path, kind, small_recordings) -> None:
+    rec = decode(small_recordings.make(kind, tmp_path / "in.mcap"))
     assert rec.frames.schema == DECODED_SCHEMA
     part = decode(tmp_path / "in.mcap", columns=frozenset({"gyro_z", "counter", "t_s"}))
     assert dict(part.frames.schema) == {k: DECODED_SCHEMA[k] for k in part.frames.columns}
 
 
-@pytest.mark.parametrize("make", [adis_recording, imu_bag])
-def test_sources_hand_out_the_decoded_values(tmp_path: Path, make) -> None:
+@pytest.mark.parametrize("kind", ["adis", "ros"])
+def test_sources_hand_out_the_decoded_values(tmp_path: Path, kind, small_recordings) -> None:
     """Each column of a segment, from memory and from the spilled store, equals the whole
     decode's (housekeeping nulls filled the same way); the recording is scanned once."""
-    path = make(tmp_path / "in.mcap")
+    path = small_recordings.make(kind, tmp_path / "in.mcap")
     whole = decode(path).frames
     rows = slice(1_000, 20_000)
     scans = []
@@ -77,10 +76,12 @@ def test_sources_hand_out_the_decoded_values(tmp_path: Path, make) -> None:
     assert os.listdir(tmp_path) == ["in.mcap"]  # the store is gone
 
 
-def test_store_is_removed_when_the_analysis_fails(tmp_path: Path, monkeypatch) -> None:
+def test_store_is_removed_when_the_analysis_fails(
+    tmp_path: Path, monkeypatch, small_recordings
+) -> None:
     """An exception (or Ctrl-C) in the middle of the analysis: the columns were on disk in
     the --tmp-dir (one file each, 8 bytes a frame for a float64 axis) and are removed."""
-    path = imu_bag(tmp_path / "in.mcap")
+    path = small_recordings.imu_bag(tmp_path / "in.mcap")
     store = tmp_path / "store"
     store.mkdir()
     seen: dict[str, int] = {}
@@ -91,36 +92,33 @@ def test_store_is_removed_when_the_analysis_fails(tmp_path: Path, monkeypatch) -
 
     monkeypatch.setattr(analyze_module, "allan_curves", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        run(path, tmp_path / "out", 0, tmp_dir=store)
+        small_recordings.run(path, tmp_path / "out", 0, tmp_dir=store)
     assert seen["gyro_x.bin"] == seen["stamp_ns.bin"] == 8 * 24_000
     assert seen["nonfinite.bin"] == 24_000
     assert list(store.iterdir()) == []
 
 
-def test_tmp_dir_must_exist_and_have_room(tmp_path: Path, monkeypatch) -> None:
-    path = imu_bag(tmp_path / "in.mcap")
+def test_tmp_dir_must_exist_and_have_room(tmp_path: Path, monkeypatch, small_recordings) -> None:
+    path = small_recordings.imu_bag(tmp_path / "in.mcap")
     with pytest.raises(InputError, match="not a directory"):
-        run(path, tmp_path / "out", 0, tmp_dir=tmp_path / "missing")
+        small_recordings.run(path, tmp_path / "out", 0, tmp_dir=tmp_path / "missing")
 
     class Full:
         free = 1_000
 
     monkeypatch.setattr(columns_module.shutil, "disk_usage", lambda _: Full)
     with pytest.raises(InputError, match="GB of temporary disk"):
-        run(path, tmp_path / "out", 0, tmp_dir=tmp_path)
+        small_recordings.run(path, tmp_path / "out", 0, tmp_dir=tmp_path)
     # in memory, no temporary disk is needed
-    report, _ = run(path, tmp_path / "out", 10**12, tmp_dir=tmp_path)
+    report, _ = small_recordings.run(path, tmp_path / "out", 10**12, tmp_dir=tmp_path)
     # frames analysed: the longest run, after the NaN at N/2 (5-frame gap at N/4 before it)
-    assert report["input"]["frames"] == N // 2 - 1
+    assert report["input"]["frames"] == small_recordings.frames // 2 - 1
 
 
-def test_cli_tmp_dir_option(tmp_path: Path, monkeypatch, capsys) -> None:
+def test_cli_tmp_dir_option(tmp_path: Path, monkeypatch, small_recordings, cli) -> None:
     """``imupipe analyze --tmp-dir``: a directory that is not there is one line, exit 2."""
-    from test_cli import in_process
 
-    path = imu_bag(tmp_path / "in.mcap")
+    path = small_recordings.imu_bag(tmp_path / "in.mcap")
     args = ["analyze", str(path), "-o", str(tmp_path / "o"), "--no-rrd", "-q"]
-    code, _, err = in_process(
-        [*args, "--memory-budget-gb", "0", "--tmp-dir", "/nonexistent"], capsys
-    )
+    code, _, err = cli([*args, "--memory-budget-gb", "0", "--tmp-dir", "/nonexistent"])
     assert code == 2 and err == "imupipe: error: /nonexistent: not a directory (--tmp-dir)\n"

@@ -14,25 +14,6 @@ from imupipe.stats.allan import allan_curves, tau_factors
 DEG = np.pi / 180
 
 
-def synth_rate(n, tau0, rng, n_white=0.0, b_flicker=0.0, k_rrw=0.0, q=0.0):
-    """Rate samples with known IEEE 952 terms (SI): white N, flicker B, RRW K, quantisation Q.
-
-    Flicker has the two-sided PSD B²/(2πf) of IEEE 952 Annex C.
-    """
-    fs = 1 / tau0
-    y = n_white / np.sqrt(tau0) * rng.standard_normal(n)
-    if b_flicker:  # synthesised 8x longer and cut, so the record is not periodic
-        f = np.fft.rfftfreq(8 * n, tau0)
-        shape = np.zeros_like(f)
-        shape[1:] = np.sqrt(b_flicker**2 / (2 * np.pi * f[1:]) * fs)  # two-sided S, IEEE 952
-        y += np.fft.irfft(np.fft.rfft(rng.standard_normal(8 * n)) * shape, 8 * n)[:n]
-    if k_rrw:
-        y += np.cumsum(k_rrw * np.sqrt(tau0) * rng.standard_normal(n))
-    if q:
-        y += np.diff(q * rng.standard_normal(n + 1)) / tau0
-    return y
-
-
 def test_exact_flicker_form_matches_psd_integral_and_plateau():
     """Annex C closed form equals 4∫S(f) sin⁴(πfτ)/(πfτ)² df with S = B²/(2πf), f ≤ f0."""
     f0, tau = 3.0, np.array([0.01, 0.05, 0.3, 2.0])
@@ -86,29 +67,26 @@ def allan_like(tau, adev, edf):
     return _Minimal(tau, adev, edf)
 
 
-N_TRUE, B_TRUE = 0.05 * DEG, 0.008 * DEG  # the paper's gyro values, SI
-
-
-def test_interval_coverage_over_seeds():
+def test_interval_coverage_over_seeds(synth_rate, paper_gyro):
     """True N and B inside the 95 % interval at about the nominal rate (≥ 16 of 20 seeds)."""
     tau0, n = 0.01, 2**18
     m = tau_factors(n)
     hits_n = hits_b = 0
     for seed in range(20):
-        y = synth_rate(n, tau0, np.random.default_rng(seed), N_TRUE, B_TRUE)
+        y = synth_rate(n, tau0, np.random.default_rng(seed), paper_gyro.n, paper_gyro.b)
         terms = ieee952.fit_noise_terms(allan_curves(y, tau0, m)[0], "gyro")
         rw, bi = terms.random_walk, terms.bias_instability
-        hits_n += rw.value is not None and rw.lo <= N_TRUE <= rw.hi
-        hits_b += bi.value is not None and bi.lo <= B_TRUE <= bi.hi
+        hits_n += rw.value is not None and rw.lo <= paper_gyro.n <= rw.hi
+        hits_b += bi.value is not None and bi.lo <= paper_gyro.b <= bi.hi
     assert hits_n >= 16
     assert hits_b >= 16
 
 
-def test_short_white_record_leaves_rrw_unresolved():
+def test_short_white_record_leaves_rrw_unresolved(synth_rate, paper_gyro):
     tau0, n = 0.01, 2**16
-    y = synth_rate(n, tau0, np.random.default_rng(7), N_TRUE)
+    y = synth_rate(n, tau0, np.random.default_rng(7), paper_gyro.n)
     terms = ieee952.fit_noise_terms(allan_curves(y, tau0)[0], "gyro")
-    assert terms.random_walk.lo < N_TRUE < terms.random_walk.hi
+    assert terms.random_walk.lo < paper_gyro.n < terms.random_walk.hi
     assert terms.rate_random_walk.value is None
     assert terms.rate_random_walk.hi > 0
 
@@ -153,7 +131,7 @@ def test_prefilter_term_exact_and_fit_starts_where_it_holds():
 LSB = 0.05 * DEG  # ADIS16364/ADIS16405 gyro resolution (rad/s per count)
 
 
-def adis_like(n, tau0, rng, n_white, b_flicker, k_rrw, decim=8, taps=16):
+def adis_like(synth_rate, n, tau0, rng, n_white, b_flicker, k_rrw, decim=8, taps=16):
     """The real-data pathology: white noise at the internal rate (``decim`` × output) through
     the SENS_AVG Bartlett filter (two cascaded ``taps``-tap averages) and decimated, so output
     samples are correlated over ~4 lags; + flicker + RRW; quantised to the 0.05 °/s LSB."""
@@ -165,13 +143,13 @@ def adis_like(n, tau0, rng, n_white, b_flicker, k_rrw, decim=8, taps=16):
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_prefiltered_quantised_sensor_resolves_b_and_k(seed):
+def test_prefiltered_quantised_sensor_resolves_b_and_k(seed, synth_rate):
     """Like the real ADIS16405 (Bartlett-correlated, ~50 codes, flicker + RRW): B and K resolved
     with the truth inside their 95 % intervals, N to its white-noise + quantisation value, the
     model adequate on the fitted range (which starts above τ0)."""
     tau0, n = 0.01, 2**20
     n_white, b_true, k_true = 7e-4, 1.4e-4, 2e-5
-    y = adis_like(n, tau0, np.random.default_rng(seed), n_white, b_true, k_true)
+    y = adis_like(synth_rate, n, tau0, np.random.default_rng(seed), n_white, b_true, k_true)
     assert 30 < len(np.unique(y)) < 100
     assert np.corrcoef(y[:-1], y[1:])[0, 1] > 0.5
     terms = ieee952.fit_noise_terms(allan_curves(y, tau0, tau_factors(n))[0], "gyro")
@@ -263,10 +241,10 @@ def test_flicker_shape_grid_equals_single_cutoffs():
     assert np.all(table[:, -1] == 2 * np.log(2) / np.pi)
 
 
-def test_fit_noise_terms_is_fit_start_then_fit_composite():
+def test_fit_noise_terms_is_fit_start_then_fit_composite(synth_rate, paper_gyro):
     """The fit reused from the deletion test = fit_composite from fit_start's τ."""
     tau0, n = 0.01, 2**16
-    y = synth_rate(n, tau0, np.random.default_rng(11), N_TRUE, B_TRUE)
+    y = synth_rate(n, tau0, np.random.default_rng(11), paper_gyro.n, paper_gyro.b)
     curve = allan_curves(y, tau0)[0]
     terms = ieee952.fit_noise_terms(curve, "gyro")
     avar, tau = np.asarray(curve.adev) ** 2, np.asarray(curve.tau_s)
@@ -282,7 +260,7 @@ CHI2_1DOF_95 = 3.841458820694124  # χ²₁ 95 % quantile (NIST/SEMATECH table: 
 
 
 @pytest.mark.parametrize("seed", [3, 4])
-def test_interval_ends_are_where_the_deviance_rises_by_chi2_95(seed: int) -> None:
+def test_interval_ends_are_where_the_deviance_rises_by_chi2_95(seed: int, synth_rate) -> None:
     """Each end of a resolved term's interval is where the profile deviance (the other terms
     refitted) exceeds the best fit's by exactly φ·χ²₁(0.95): a 95 % likelihood-ratio interval,
     not an ~83 % one (χ²₁(0.83) = 1.88)."""

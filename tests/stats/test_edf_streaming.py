@@ -201,7 +201,7 @@ print((peak[0] - base) / 1e6)
 def test_noise_ids_allocates_nothing_proportional_to_n():
     """8 M samples: the m = 1 averaged series alone would be 64 MB; with series longer than
     2**16 values streamed, the peak grows < 8 MB."""
-    root = Path(__file__).parents[1]
+    root = Path(__file__).resolve().parents[2]
     out = subprocess.run(
         [sys.executable, "-c", _RSS_SCRIPT], cwd=root, capture_output=True, text=True, check=True
     )

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_ieee952 import B_TRUE, N_TRUE, synth_rate
 
 from imupipe.model import effects, loop
 from imupipe.stats.allan import allan_curves
@@ -14,10 +13,10 @@ TAU0, N = 0.1, 2**16
 
 
 @pytest.fixture(scope="module")
-def spiky():
+def spiky(paper_gyro):
     """(series with 6 spikes and a 1.3 Hz line, the same without spikes)."""
     rng = np.random.default_rng(21)
-    clean = synth_rate(N, TAU0, rng, N_TRUE, B_TRUE)
+    clean = paper_gyro.rate(N, TAU0, rng)
     clean += 2e-3 * np.sin(2 * np.pi * 1.3 * np.arange(N) * TAU0)
     y = clean.copy()
     y[[5, 900, 20_000, 40_001, 50_000, N - 1]] += [0.4, -0.5, 0.6, 0.45, -0.7, 0.5]

@@ -34,7 +34,7 @@ from imupipe.recording.spi import (
 )
 from imupipe.testing.fake_spi import FakeAdis16364, SpiProtocolViolation
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 RATE_819 = config_for_rate(sample_rate_sps(0x01), source="spi")  # SMPL_PRD 0x01: fast mode
 RATE_102 = config_for_rate(102.4, source="spi")  # SMPL_PRD 0x0F: low-power mode
 LINE = "/dev/gpiochip0:17"

@@ -24,7 +24,9 @@ from imupipe.report.exports import render
 from imupipe.report.report import format_table
 from imupipe.stats.allan import allan_curves
 
-REAL = json.loads((Path(__file__).parent / "data" / "real_final_model.json").read_text())
+REAL = json.loads(
+    (Path(__file__).resolve().parents[1] / "data" / "real_final_model.json").read_text()
+)
 PLATEAU = 0.664  # sqrt(2 ln 2 / pi), IEEE 952 Annex C
 
 

@@ -173,13 +173,13 @@ def test_column_blocks_join_like_concatenate(monkeypatch: pytest.MonkeyPatch) ->
         np.testing.assert_array_equal(joined, np.concatenate(parts))
 
 
-def test_adis_subsets_equal_the_whole_decode(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+def test_adis_subsets_equal_the_whole_decode(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, small_recordings
+):
     """ADIS16364 frames are decoded run by run into the asked columns only (integer counts,
     scaled at the end): the same values, dtypes and flags as the whole decode."""
-    from test_lowmem import adis_recording
-
     monkeypatch.setattr(dec, "_BLOCK_BYTES", 40_000)
-    path = adis_recording(tmp_path / "adis.mcap")
+    path = small_recordings.adis_recording(tmp_path / "adis.mcap")
     f = decode(path).frames
     assert f["saturated"].sum() == 1 and f["flag_nd"].all()
     assert f["gyro_y"].max() == pytest.approx(8191 * 0.05 * np.pi / 180)  # the rail, rad/s

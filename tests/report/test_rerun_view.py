@@ -6,7 +6,6 @@ archetypes logged (a recording stand-in that keeps them)."""
 
 from __future__ import annotations
 
-import re
 import subprocess
 from pathlib import Path
 
@@ -14,7 +13,6 @@ import numpy as np
 import polars as pl
 import pytest
 import rerun.blueprint as rrb
-from test_report import synthetic_result
 
 import imupipe.report.rerun_view as rv
 from imupipe.errors import ViewerError
@@ -40,33 +38,12 @@ def _verify(path: Path) -> subprocess.CompletedProcess:
     )
 
 
-def _chunk_lines(path: Path) -> list[tuple[str, int, str]]:
-    """(entity path, rows, data columns) of every chunk in file order, from `rerun rrd print`."""
-    out = subprocess.run(
-        [rerun_executable(), "rrd", "print", str(path)], capture_output=True, text=True, check=True
-    ).stdout
-    found = (
-        re.match(r"Chunk\(\S+\) with (\d+) rows .* - (/\S+) - (.*)", x) for x in out.splitlines()
-    )
-    return [(m[2], int(m[1]), m[3]) for m in found if m]
-
-
-def _chunks(path: Path) -> dict[str, int]:
-    """{entity path: rows of its data} of the data (not blueprint) chunks (summed over chunks)."""
-    chunks: dict[str, int] = {}
-    for entity, rows, columns in _chunk_lines(path):
-        if entity.split("/")[1] in ("signals", "allan", "residual", "summary"):
-            rows = rows if "Scalars:scalars" in columns else 0
-            chunks[entity] = chunks.get(entity, 0) + rows
-    return chunks
-
-
-def test_rrd_verifies_and_holds_every_signal(tmp_path: Path) -> None:
+def test_rrd_verifies_and_holds_every_signal(tmp_path: Path, synthetic_result, rrd_chunks) -> None:
     frames = _frames(20_000)
     path = write_rrd(synthetic_result(), frames, tmp_path / "recording.rrd")
     done = _verify(path)
     assert done.returncode == 0, done.stdout + done.stderr
-    chunks = _chunks(path)
+    chunks = rrd_chunks.rows(path)
     for group in ("gyro", "accel", "temperature", "supply"):
         assert chunks[f"/signals/{group}"] == 20_000  # every raw frame
     for axis in ("gyro_x", "gyro_y", "gyro_z", "accel_y", "accel_z"):
@@ -81,7 +58,7 @@ def test_rrd_verifies_and_holds_every_signal(tmp_path: Path) -> None:
     assert not any(p.startswith("/residual/gyro") for p in chunks)  # no loop on the gyros
 
 
-def test_ros_frames_without_temperature_or_supply(tmp_path: Path) -> None:
+def test_ros_frames_without_temperature_or_supply(tmp_path: Path, synthetic_result) -> None:
     frames = _frames(5_000, ros=True)
     assert list(signal_columns(frames)) == ["gyro", "accel"]  # no temperature, no supply plot
     path = write_rrd(synthetic_result(with_loop=False), frames, tmp_path / "ros.rrd")
@@ -89,13 +66,15 @@ def test_ros_frames_without_temperature_or_supply(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stdout + done.stderr
 
 
-def test_full_signals_go_in_bulk_chunks(tmp_path: Path) -> None:
+def test_full_signals_go_in_bulk_chunks(tmp_path: Path, synthetic_result, rrd_chunks) -> None:
     """--rrd-full sends 250 k frames per plot in CHUNK_ROWS-row batches, never per sample (the
     whole analyze wall time, rrd included, is reported by benchmarks/bench_decode.py --analyze)."""
     frames = _frames(250_000)
     path = write_rrd(synthetic_result(), frames, tmp_path / "big.rrd", full=True)
     for plot in ("gyro", "accel", "temperature", "supply"):
-        rows = [r for e, r, c in _chunk_lines(path) if e == f"/signals/{plot}" and "Scalars" in c]
+        rows = [
+            r for e, r, c in rrd_chunks.lines(path) if e == f"/signals/{plot}" and "Scalars" in c
+        ]
         assert sum(rows) == 250_000 and len(rows) <= -(-250_000 // rv.CHUNK_ROWS)
 
 
@@ -116,7 +95,9 @@ def _views(container) -> list[rrb.View]:
     return [v for c in container.contents for v in _views(c)]
 
 
-def test_blueprint_shows_the_whole_recording_one_quantity_per_plot_with_legends() -> None:
+def test_blueprint_shows_the_whole_recording_one_quantity_per_plot_with_legends(
+    synthetic_result,
+) -> None:
     bp = rv.blueprint(synthetic_result(), ["gyro", "accel", "temperature", "supply"], bin_s=0.43)
     views = _views(bp.root_container)
     plots = [v for v in views if isinstance(v, rrb.TimeSeriesView)]
@@ -163,7 +144,7 @@ def _labels(archetype: object) -> list[str]:
     return archetype.labels.as_arrow_array().to_pylist()
 
 
-def test_allan_and_residual_views_label_tau_and_carry_a_legend() -> None:
+def test_allan_and_residual_views_label_tau_and_carry_a_legend(synthetic_result) -> None:
     result = synthetic_result()
     rec = _KeepLogs()
     rv._log_allan(rec, "accel", result.by_sensor("accel"))
@@ -193,7 +174,7 @@ def test_allan_and_residual_views_label_tau_and_carry_a_legend() -> None:
     assert curves and not any(rec.logged[p].labels for p in curves)  # no labels on the curves
 
 
-def test_summary_states_si_beside_the_paper_units() -> None:
+def test_summary_states_si_beside_the_paper_units(synthetic_result) -> None:
     result = synthetic_result()
     md = rv.summary_markdown(result)
     n = result.axes["gyro_x"].terms.random_walk
@@ -208,36 +189,40 @@ def test_summary_states_si_beside_the_paper_units() -> None:
 
 
 def test_layout_and_names_come_before_the_data_and_long_runs_are_enveloped(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, synthetic_result, rrd_chunks
 ) -> None:
     monkeypatch.setattr(rv, "ENVELOPE_BINS", 1_000)
     frames = _frames(20_000)
     path = write_rrd(synthetic_result(), frames, tmp_path / "small.rrd")
-    chunks = _chunk_lines(path)
+    chunks = rrd_chunks.lines(path)
     first_data = next(i for i, c in enumerate(chunks) if "Scalars:scalars" in c[2])
     before = {(e, "SeriesLines:names" in cols) for e, _, cols in chunks[:first_data]}
     assert ("/viewport", False) in before
     assert {(f"/signals/{g}", True) for g in ("gyro", "accel", "temperature", "supply")} <= before
-    assert _chunks(path)["/signals/accel"] == 2_000  # min and max of 1000 bins of 20 samples
+    assert (
+        rrd_chunks.rows(path)["/signals/accel"] == 2_000
+    )  # min and max of 1000 bins of 20 samples
     full = write_rrd(synthetic_result(), frames, tmp_path / "full.rrd", full=True)
-    assert _chunks(full)["/signals/accel"] == 20_000
+    assert rrd_chunks.rows(full)["/signals/accel"] == 20_000
     assert path.stat().st_size < full.stat().st_size / 3
 
 
 @pytest.mark.parametrize(("flags", "rows"), [((), 2_000), (("--rrd-full",), 6_000)])
 def test_analyze_writes_an_envelope_unless_rrd_full(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, flags: tuple[str, ...], rows: int
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    flags: tuple[str, ...],
+    rows: int,
+    rrd_chunks,
+    small_recordings,
 ) -> None:
     """`imupipe analyze` (in process) on 6000 frames with 1000-bin envelopes."""
-    from test_cli import CONFIG, write_adis
-
     from imupipe.cli import app
-    from imupipe.recording.simulator import VirtualADIS16364
 
     monkeypatch.setattr(rv, "ENVELOPE_BINS", 1_000)
-    run = write_adis(tmp_path / "run.mcap", VirtualADIS16364(CONFIG, None, seed=2).frames(6000))
+    run = small_recordings.recording(tmp_path / "run.mcap", 100.0, 6000, seed=2)
     out = tmp_path / "out"
     args = ["analyze", str(run), "--no-loop", "-q", "--out", str(out), *flags]
     assert app(args, standalone_mode=False) in (None, 0)
-    chunks = _chunks(out / "recording.rrd")
+    chunks = rrd_chunks.rows(out / "recording.rrd")
     assert {chunks[f"/signals/{g}"] for g in ("gyro", "accel", "temperature", "supply")} == {rows}

@@ -10,17 +10,8 @@ from imupipe.stats import allan
 from imupipe.stats.allan import allan_curves, oadev, phase, tau_factors
 
 
-def nist_1000() -> np.ndarray:
-    """NIST SP 1065 1000-point set: n_{i+1} = 16807 n_i mod (2**31 - 1), y = n / (2**31 - 1)."""
-    n = [1234567890]
-    for _ in range(999):
-        n.append((16807 * n[-1]) % 2147483647)
-    assert n[1:4] == [395529916, 1209410747, 633705974]
-    return np.array(n, dtype=np.float64) / 2147483647
-
-
-def test_nist_sp1065_oadev():
-    adev, n_terms = oadev(nist_1000(), 1.0, np.array([1, 10, 100]))
+def test_nist_sp1065_oadev(nist_1000):
+    adev, n_terms = oadev(nist_1000, 1.0, np.array([1, 10, 100]))
     published = np.array([2.922319e-01, 9.159953e-02, 3.241343e-02])  # NIST SP 1065 p. 108
     np.testing.assert_allclose(adev, published, rtol=1e-6)
     np.testing.assert_array_equal(n_terms, [999, 981, 801])

@@ -329,18 +329,30 @@ def test_mask_policy_backwards_stamp_row_is_excluded() -> None:
     np.testing.assert_array_equal(np.flatnonzero(s.excluded), [100])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known bug: the row after a stamp 2 periods back is placed "
-    "by its stamp step (3) although the counter (1) is right; grid shifted by 2",
-)
 def test_mask_policy_stamp_two_periods_back_does_not_shift_the_grid() -> None:
+    """One stamp 2 periods back (counter right): only its row is masked; the row after it is
+    placed by the counter (the span from the row before agrees), not by its 3-period stamp
+    step."""
+
     def backwards(a):
         a[100] = a[98]
 
     s = condition(recording(stamp_ns=backwards), gaps="mask")
     assert s.samples == 1000 and s.tau0_s == pytest.approx(0.01, rel=1e-9)
     np.testing.assert_array_equal(np.flatnonzero(s.excluded), [100])
+
+
+def test_mask_policy_one_stamp_ahead_does_not_shift_the_grid() -> None:
+    """One stamp 7 periods ahead, the next ones right (counter right): the row is placed by
+    the counter (no 6-sample hole); it and the row after it (stamp step backwards) are
+    masked."""
+
+    def ahead(a):
+        a[200] += 60_000_000
+
+    s = condition(recording(stamp_ns=ahead), gaps="mask")
+    assert s.samples == 1000
+    np.testing.assert_array_equal(np.flatnonzero(s.excluded), [200, 201])
 
 
 def test_mask_policy_stamp_gap_wins_over_a_counter_that_disagrees() -> None:

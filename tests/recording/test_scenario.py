@@ -17,7 +17,7 @@ from imupipe.recording.scenario import (
     scenario_from_dict,
 )
 
-SAMPLE_LOGS = Path(__file__).resolve().parent.parent / "sample_logs"
+SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "sample_logs"
 
 
 def test_documented_example_parses():
