@@ -494,34 +494,9 @@ def demo(
     """The paper's experiment end to end: record 12 h of a virtual ADIS16364, then analyse it."""
     out.mkdir(parents=True, exist_ok=True)
     mcap_path = out / "adis16364.mcap"
-    record(
-        output=mcap_path,
-        duration=duration,
-        seed=seed,
-        truth=out / "truth.json",
-        quiet=quiet,
-        rate=100.0,
-        scenario=None,
-        source=Source.sim,
-        device="",
-        serial=0,
-        realtime=False,
-    )
-    analyze(
-        path=mcap_path,
-        out=out / "adis16364.imupipe",
-        topic=None,
-        taus_per_decade=10,
-        gaps=GapPolicy.longest,
-        rrd=True,
-        loop=True,
-        quiet=quiet,
-        datasheet=None,
-        export=None,
-        combine=Combine.worst,
-        inflate=1.0,
-        export_rate=None,
-    )
+    # the commands' own defaults (typer's Annotated options keep plain Python defaults)
+    record(output=mcap_path, duration=duration, seed=seed, truth=out / "truth.json", quiet=quiet)
+    analyze(path=mcap_path, out=out / "adis16364.imupipe", quiet=quiet)
 
 
 class _Stopped(BaseException):
