@@ -182,12 +182,13 @@ def outlier_warnings(results: dict[str, AxisResult]) -> list[str]:
 
 
 def input_summary(
-    rec: ImuRecording, series: ConditionedSeries, warnings: list[str]
+    rec: ImuRecording, series: ConditionedSeries, warnings: list[str], label: str | None = None
 ) -> InputSummary:
-    """The report's ``input`` section for the chosen segment (or masked grid)."""
+    """The report's ``input`` section for the chosen segment (or masked grid); ``label`` names
+    the input instead of its local path (a fleet unit read from a URL)."""
     n = series.samples
     return InputSummary(
-        path=str(rec.path),
+        path=str(rec.path) if label is None else label,
         topic=rec.topic,
         frames=series.usable_samples,
         rate_hz=series.rate_hz,
@@ -238,9 +239,14 @@ def analyze_axes(
 
 
 def analyze(
-    path: Path, options: AnalyzeOptions, progress: StageProgress, outputs: Outputs
+    path: Path,
+    options: AnalyzeOptions,
+    progress: StageProgress,
+    outputs: Outputs,
+    label: str | None = None,
 ) -> AnalysisResult:
-    """Analyse the recording at ``path`` and hand the result to ``outputs``.
+    """Analyse the recording at ``path`` and hand the result to ``outputs``; every output names
+    the input ``label`` (default: ``path``).
 
     The raw signals go to ``outputs.begin`` as soon as the segment is known (the Rerun
     recording encodes them while the axes are analysed).  A recording whose estimated peak
@@ -279,7 +285,7 @@ def analyze(
             *source.notes(series.segment.frames, options.rrd),
         ]
     result = AnalysisResult(
-        input=input_summary(about, series, warnings), axes=results, device=about.device
+        input=input_summary(about, series, warnings, label), axes=results, device=about.device
     )
     outputs.finish(result, progress)
     return result

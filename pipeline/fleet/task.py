@@ -122,13 +122,9 @@ def analyze_unit(rec: Recording, out_root: str, options: AnalyzeOptions) -> Unit
     try:
         sheet = None if opts.datasheet is None else load_datasheet(opts.datasheet)
         outputs = ReportOutputs(staging, opts.figures, opts.rrd_full, datasheet=sheet)
-        with local_copy(rec) as path:
-            result = run_analysis(path, opts, StageProgress(quiet=True), outputs)
-        if not rec.local:  # report the URL, not the worker's temporary copy
-            from imupipe.report.report import write_report
-
-            result = replace(result, input=replace(result.input, path=rec.location))
-            write_report(result, staging, figures=opts.figures, datasheet=sheet)
+        with local_copy(rec) as path:  # the outputs name the URL, not the temporary copy
+            label = None if rec.local else rec.location
+            result = run_analysis(path, opts, StageProgress(quiet=True), outputs, label)
         publish(staging, root / rec.name)
     except Exception as exc:  # any failure is this unit's, never the fleet's
         shutil.rmtree(staging, ignore_errors=True)

@@ -20,6 +20,7 @@ import pytest
 from imupipe.api import analyze, record
 from imupipe.fleet.curves import UNIT_COLUMN
 from imupipe.fleet.run import run_fleet
+from imupipe.report.rerun_view import rerun_executable
 
 BIN = Path(sys.executable).parent
 
@@ -83,6 +84,12 @@ def test_local_cluster_local_and_s3_units(tmp_path, s3_server):
     ref_b["input"].pop("path")
     assert got_b == ref_b
     assert _files(out / "unit_b") == _files(tmp_path / "ref_b")
+    assert "s3://fleet/site1/unit_b.mcap" in (out / "unit_b" / "report.md").read_text()
+    rrd = subprocess.run(
+        [rerun_executable(), "rrd", "print", "-vvv", str(out / "unit_b" / "recording.rrd")],
+        capture_output=True, text=True, check=True,
+    ).stdout  # fmt: skip
+    assert "s3://fleet/site1/unit_b.mcap" in rrd and "imupipe-fleet-" not in rrd  # not the copy
     assert not (out / ".staging").exists()
 
     # fleet.parquet: every unit's curves, long form, equal to the unit's allan.parquet
