@@ -26,7 +26,7 @@ def start_recorder(out: Path, *extra: str, **popen) -> subprocess.Popen:
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
 
 
-def wait_for_first_chunk(out: Path, timeout_s: float = 30.0) -> float:
+def wait_for_first_chunk(out: Path, timeout_s: float = 120.0) -> float:
     """Wall time at which the recorder had written its first chunk (file past its header)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
