@@ -565,7 +565,7 @@ hostile_text = st.text(
 )
 @given(st.lists(pieces, min_size=1, max_size=3), hostile_text, st.booleans())
 def test_structurally_hostile_mcap_is_exit_2_or_a_warning(
-    tmp_path: Path, parts, topic: str, cut: bool, cli
+    tmp_path: Path, cli, parts, topic: str, cut: bool
 ) -> None:
     """Nested chunks, bombs beyond the budget, chunks lying about their size, headers claiming
     absurd sizes, a cut tail, a hostile topic: ``imupipe analyze`` exits 0 with a warning for

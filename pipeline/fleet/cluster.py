@@ -49,17 +49,7 @@ def fleet_client(scheduler: str | None = None, workers: int | None = None) -> It
     if address is None:
         n = workers or CPU_COUNT
         with (
-            LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                dashboard_address="127.0.0.1:0",
-                # a worker's heartbeat racing the scheduler's shutdown logs an ERROR with a
-                # traceback on the user's terminal; every unit's failure is in the fleet report
-                silence_logs=logging.CRITICAL,
-                env=SINGLE_THREAD_ENV,
-            ) as cluster,
+            _started(n) as cluster,
             Client(cluster) as client,
         ):
             yield client
@@ -78,3 +68,31 @@ def fleet_client(scheduler: str | None = None, workers: int | None = None) -> It
                     f"{CONNECT_TIMEOUT_S * 6:.0f} s"
                 ) from exc
         yield client
+
+
+@contextlib.contextmanager
+def _started(n: int) -> Iterator[LocalCluster]:
+    """The embedded ``LocalCluster`` of ``n`` single-threaded worker processes.
+
+    Raises:
+        FleetError: it did not start (Dask's start-up timeouts on an overloaded machine).
+    """
+    try:
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            # a worker's heartbeat racing the scheduler's shutdown logs an ERROR with a
+            # traceback on the user's terminal; every unit's failure is in the fleet report
+            silence_logs=logging.CRITICAL,
+            env=SINGLE_THREAD_ENV,
+        )
+    except (TimeoutError, OSError) as exc:
+        raise FleetError(
+            f"the local Dask cluster of {n} worker(s) did not start: {exc or type(exc).__name__} "
+            "(is the machine overloaded? --workers fewer, or --scheduler an existing cluster)"
+        ) from exc
+    with cluster:
+        yield cluster
