@@ -227,3 +227,23 @@ def test_bad_arguments_fail_before_any_worker_starts(tmp_path, monkeypatch):
         run.run_fleet([rec], tmp_path / "out", datasheet=sheet)
     with pytest.raises(FleetError, match="no recording"):
         run.run_fleet([tmp_path / "nothing_here"], tmp_path / "out")
+
+
+def test_a_local_cluster_that_does_not_start_is_one_line(tmp_path, monkeypatch, cli):
+    """Dask's start-up timeout (seen at load 30 on two cores) is the fleet's one-line error and
+    exit 2, not an internal error."""
+    import imupipe.fleet.cluster as cluster
+
+    def too_slow(**kwargs):
+        raise TimeoutError("Nanny failed to start in 60 seconds")
+
+    monkeypatch.setattr(cluster, "LocalCluster", too_slow)
+    (tmp_path / "u.mcap").write_bytes(b"\x89MCAP0\r\n")
+    args = ["fleet", str(tmp_path / "u.mcap"), "--out", str(tmp_path / "f"), "--workers", "2"]
+    code, _, err = cli([*args, "-q"])
+    assert code == 2
+    assert err == (
+        "imupipe: error: the local Dask cluster of 2 worker(s) did not start: Nanny failed to "
+        "start in 60 seconds (is the machine overloaded? --workers fewer, or --scheduler an "
+        "existing cluster)\n"
+    )
