@@ -20,8 +20,9 @@ Usage (from the repository root, in the project's virtualenv with ``pip install 
 after tests were added to kill them.
 
 Prints, per module: mutants, killed, survived, timeouts (counted as killed), skipped (outside
-``--functions``, or a float -> bit-operator swap unless ``--all-operators``) and the diff of
-every survivor.
+``--functions``/``--lines``, not in ``--sample``, inside an annotation (never evaluated under
+``from __future__ import annotations``: always equivalent), or a float -> bit-operator swap
+unless ``--all-operators``) and the diff of every survivor.
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_mcap_io.py",
     ),
     "pipeline/report/report.py": ("tests/report/test_report_text.py", "tests/test_report.py"),
-    "pipeline/report/exports.py": ("tests/test_exports.py",),
+    "pipeline/report/exports.py": ("tests/report/test_exports_values.py", "tests/test_exports.py"),
     "pipeline/device/adis16364.py": (
         "tests/test_adis16364.py",
         "tests/test_scale_factors.py",
@@ -105,6 +106,31 @@ def _function_lines(module: Path, names: set[str]) -> set[int]:
     if missing:
         raise SystemExit(f"{module}: no function named {', '.join(sorted(missing))}")
     return lines
+
+
+def _annotation_spans(module: Path) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+    """(start, end) positions of every annotation when the module has ``from __future__ import
+    annotations``: they are never evaluated, so mutants inside them are always equivalent."""
+    tree = ast.parse(module.read_text())
+    future = any(
+        isinstance(n, ast.ImportFrom)
+        and n.module == "__future__"
+        and any(a.name == "annotations" for a in n.names)
+        for n in tree.body
+    )
+    if not future:
+        return []
+    notes: list[ast.expr] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.arg) and node.annotation is not None:
+            notes.append(node.annotation)
+        elif isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.returns:
+            notes.append(node.returns)
+        elif isinstance(node, ast.AnnAssign):
+            notes.append(node.annotation)
+    return [
+        ((n.lineno, n.col_offset), (n.end_lineno or n.lineno, n.end_col_offset or 0)) for n in notes
+    ]
 
 
 def _test_command(tests: tuple[str, ...]) -> str:
@@ -196,6 +222,7 @@ def run_module(
     subprocess.run([*cr, "init", str(config), str(session)], cwd=ROOT, env=env, check=True)
 
     keep = _function_lines(ROOT / module, functions) if functions else None
+    annotations = _annotation_spans(ROOT / module)
     if lines:
         keep = (keep or set()) | lines
     with use_db(str(session), WorkDB.Mode.open) as db:
@@ -213,6 +240,21 @@ def run_module(
             db.set_multiple_results(
                 drop, WorkResult(worker_outcome=WorkerOutcome.SKIPPED, output="not selected")
             )
+        dropped = set(drop)
+        in_notes = [
+            item.job_id
+            for item in pending
+            if item.job_id not in dropped
+            and all(
+                any(a <= tuple(m.start_pos) < b for a, b in annotations) for m in item.mutations
+            )
+        ]
+        if in_notes:
+            db.set_multiple_results(
+                in_notes,
+                WorkResult(worker_outcome=WorkerOutcome.SKIPPED, output="annotation (equivalent)"),
+            )
+        drop += in_notes
         chosen = sorted({item.job_id for item in pending} - set(drop))
         if sample is not None and sample < len(chosen):
             kept = set(random.Random(seed).sample(chosen, sample))

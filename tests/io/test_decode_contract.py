@@ -7,6 +7,7 @@ topic.  Behaviour only: no internal of the decoder is used."""
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -289,3 +290,34 @@ def test_imu_temperature_is_its_own_interpolated(
         np.testing.assert_allclose(f["temp_c"].to_numpy(), expected, rtol=0, atol=1e-6)
     sub = decode(tmp_path / "bag", columns=frozenset({"temp_c", "gyro_x"})).frames
     assert sub.columns == ["gyro_x", "temp_c"] and sub.equals(f.select("gyro_x", "temp_c"))
+
+
+def test_split_files_of_different_devices_are_refused(tmp_path: Path) -> None:
+    folder = tmp_path / "bag"
+    folder.mkdir()
+    block = _block(_counts(10), T0 + np.arange(10) * 10_000_000)
+    write_adis(folder / "bag_0.mcap", block)
+    write_adis(folder / "bag_1.mcap", block, meta=DeviceConfig(sens_avg=0x0202).to_metadata())
+    with pytest.raises(
+        InputError,
+        match=r"bag_1.mcap carries different 'adis16364' metadata than the files before it "
+        r"\(gyro_range_dps, gyro_scale_dps_per_lsb, sens_avg\): one scale for all would be wrong",
+    ):
+        decode(folder)
+    write_adis(folder / "bag_1.mcap", block)  # the same device: read as one recording
+    assert decode(folder).frames.height == 20
+
+
+def test_what_is_not_a_recording(tmp_path: Path) -> None:
+    (tmp_path / "empty.mcap").write_bytes(b"")
+    with pytest.raises(InputError, match=r"empty\.mcap: empty file"):
+        decode(tmp_path / "empty.mcap")
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    os.mkfifo(bag / "a.mcap")
+    with pytest.raises(InputError, match=r"a.mcap: not a regular file \(a FIFO"):
+        decode(bag)
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "x.txt").write_text("x")
+    with pytest.raises(InputError, match="notes: a directory without MCAP files"):
+        decode(tmp_path / "notes")

@@ -1,6 +1,7 @@
 """The recorder in process: how frames are cut into chunks (what a SIGKILL can lose), the summary a
 user is shown, pacing of a simulated real-time recording, SIGTERM finishing the file, write
-errors as one line, durations as typed, the truth file.  (The subprocess tests with real signals
+errors as one line, durations as typed, the truth file.  Pacing runs on a stand-in clock (no
+timed test).  (The subprocess tests with real signals
 and a full disk are tests/test_recorder_signals.py.)"""
 
 from __future__ import annotations
@@ -8,7 +9,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import time
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,7 @@ from mcap.reader import make_reader
 from imupipe.device.adis16364 import DeviceConfig, FrameBlock
 from imupipe.errors import ImupipeError
 from imupipe.io.decode import decode
+from imupipe.recording import recorder
 from imupipe.recording.recorder import FAST_CHUNK_FRAMES, parse_duration, record, write_truth
 
 T0 = 1_700_000_000_000_000_000
@@ -93,13 +94,48 @@ def test_real_time_chunks_hold_one_second(
     assert s.duration_s == pytest.approx(n / rate_hz, rel=1e-12)
 
 
-def test_simulated_real_time_is_paced_to_the_output_rate(tmp_path: Path) -> None:
-    src = Source(rate_hz=50.0, source="sim")
-    start = time.monotonic()
-    s = record(tmp_path / "f.mcap", src, 20, realtime=True)
-    elapsed = time.monotonic() - start
-    assert s.frames == 20
-    assert elapsed >= 20 / 50.0  # 0.4 s of frames take at least 0.4 s (sleep never wakes early)
+class Clock:
+    """Stands in for the recorder's ``time``: ``sleep`` advances ``monotonic`` and is logged,
+    and each chunk "takes" ``work_s`` of the clock."""
+
+    def __init__(self, work_s: float = 0.0) -> None:
+        self.now, self.work_s, self.sleeps = 100.0, work_s, []
+
+    def monotonic(self) -> float:
+        self.now += self.work_s
+        return self.now
+
+    def sleep(self, s: float) -> None:
+        self.sleeps.append(round(s, 9))
+        self.now += s
+
+
+@pytest.mark.parametrize(
+    ("source", "realtime", "sleeps"),
+    [("sim", True, [1.0, 1.0, 0.5]), ("sim", False, []), ("spi", True, [])],
+)
+def test_only_a_simulated_real_time_recording_is_paced(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, source: str, realtime: bool, sleeps: list
+) -> None:
+    clock = Clock()
+    monkeypatch.setattr(recorder, "time", clock)
+    s = record(tmp_path / "f.mcap", Source(rate_hz=10.0, source=source), 25, realtime=realtime)
+    assert s.frames == 25
+    assert clock.sleeps == sleeps  # chunk k ends at k s of frames: sleep until then
+
+
+def test_pacing_subtracts_the_time_already_spent(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    clock = Clock(work_s=0.125)  # every clock reading is 0.125 s after the previous one
+    monkeypatch.setattr(recorder, "time", clock)
+    record(tmp_path / "f.mcap", Source(rate_hz=10.0, source="sim"), 20, realtime=True)
+    # start at 100.125; chunk 1 done at 100.25: 1 - 0.125 ahead; chunk 2 read at 101.25: 0.875
+    assert clock.sleeps == [0.875, 0.875]
+    slow = Clock(work_s=2.0)  # behind real time: no sleep
+    monkeypatch.setattr(recorder, "time", slow)
+    record(tmp_path / "g.mcap", Source(rate_hz=10.0, source="sim"), 20, realtime=True)
+    assert slow.sleeps == []
 
 
 def test_sigterm_stops_after_the_current_chunk_and_finishes_the_file(tmp_path: Path) -> None:
