@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,7 @@ from scipy.stats import chi2
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.device.frame_schema import SCHEMA_NAME
 from imupipe.model import ieee952
-from imupipe.model.loop import AcceptedEffect, Goodness, RejectedCandidate
+from imupipe.model.loop import AcceptedEffect, Goodness, LoopResult, RejectedCandidate
 from imupipe.report.report import format_table, kalibr_yaml, write_report
 from imupipe.stats import allan
 from imupipe.units import SI_UNIT, from_si, to_si
@@ -79,42 +78,6 @@ def _terms(sensor: str, n: float, b: float, k: float | None):
     )
 
 
-@dataclass
-class StandInLoop:
-    """Duck-typed stand-in for imupipe.model.loop.LoopResult (its contract, issue 4)."""
-
-    terms_before: object
-    terms_after: object
-    adev_after: np.ndarray
-    model_adev_before: np.ndarray
-    model_adev_after: np.ndarray
-    z_before: np.ndarray
-    z_after: np.ndarray
-    accepted: list[AcceptedEffect] = field(default_factory=list)
-    rejected: list[RejectedCandidate] = field(
-        default_factory=lambda: [RejectedCandidate("sinusoid", {}, {}, {}, "ΔBIC 2.1 < 10")]
-    )
-    before: Goodness | None = None
-
-    def as_model_dict(self) -> dict:
-        return {
-            "terms": {
-                "white": {"value": 2.8e-3, "lo": 2.7e-3, "hi": 2.9e-3, "unit": "m/s^2/sqrt(Hz)"},
-            },
-            "error_before": 4.2,
-            "error_after": 1.03,
-            "dof": 40,
-            "p_value_before": 0.0,
-            "p_value_after": 0.41,
-            "rms_z_before": 3.1,
-            "rms_z_after": 0.9,
-            "max_abs_z_before": 5.9,
-            "max_abs_z_after": 2.2,
-            "tau_max_abs_z_before": 4000.0,
-            "tau_max_abs_z_after": 80.0,
-        }
-
-
 def synthetic_result(with_loop: bool = True) -> AnalysisResult:
     """Six axes with the paper's N and B as truth; a loop result on accel_x."""
     axes = {}
@@ -144,18 +107,22 @@ def synthetic_result(with_loop: bool = True) -> AnalysisResult:
             error_before=4.2,
             error_after=1.03,
         )
+        z_after = rng.normal(0, 1, ax.curve.tau_s.size)
         axes["accel_x"] = dataclasses.replace(
             ax,
-            loop=StandInLoop(
-                terms_before=ax.terms,
-                terms_after=ax.terms,
+            loop=LoopResult(
+                name="accel_x",
+                tau_s=ax.curve.tau_s,
+                adev_before=ax.curve.adev,
                 adev_after=ax.curve.adev * 0.97,
+                terms_before=dataclasses.replace(ax.terms, deviance_per_dof=4.2),
+                terms_after=ax.terms,
                 model_adev_before=ax.curve.adev * 0.9,
                 model_adev_after=ax.curve.adev,
-                z_before=z_before,
-                z_after=rng.normal(0, 1, ax.curve.tau_s.size),
-                accepted=[effect],
                 before=Goodness(4.2, 168.0, 40, 0.0, z_before, 5.9, 4000.0, 3.1, 4),
+                after=Goodness(1.03, 39.14, 38, 0.41, z_after, 2.2, 80.0, 0.9, 0),
+                accepted=[effect],
+                rejected=[RejectedCandidate("sinusoid", {}, {}, {}, "ΔBIC 2.1 < 10")],
             ),
         )
     inp = InputSummary(
@@ -234,8 +201,14 @@ def test_report_json_matches_schema_and_contract(written) -> None:
     assert gyro["allan"]["tau_s"] == curve.tau_s.tolist()
     assert gyro["allan"]["adev"] == curve.adev.tolist()
     accel = on_disk["axes"]["accel_x"]
-    # the loop's errors reach report.json unchanged (the stand-in's 4.2 -> 1.03)
-    assert (accel["model"]["error_before"], accel["model"]["error_after"]) == (4.2, 1.03)
+    # the model block of a looped axis: the FINAL model's terms (SI, with units) and the
+    # goodness before -> after, in that order, with the dof of the final fit
+    model = accel["model"]
+    assert model["terms"]["random_walk"]["value"] == pytest.approx(to_si(0.29, "mg/√s"))
+    assert model["terms"]["random_walk"]["unit"] == "m/s^2/sqrt(Hz)"
+    assert "reason" not in model["terms"]["random_walk"]
+    assert (model["error_before"], model["error_after"], model["dof"]) == (4.2, 1.03, 38)
+    assert (model["tau_max_abs_z_before"], model["tau_max_abs_z_after"]) == (4000.0, 80.0)
     assert accel["effects"][0]["kind"] == "temperature"
     assert "model" not in on_disk["axes"]["accel_y"]
 
@@ -247,7 +220,13 @@ def test_schema_check_catches_broken_reports(written) -> None:
     del broken["input"]["frames"]
     broken["axes"]["gyro_y"]["ieee952"]["rate_ramp"]["unit"] = 3
     broken["axes"]["accel_x"]["effects"][0]["kind"] = "gremlin"
+    # the shipped schema rejects each of the three breakages, where it is
     errors = schema_errors(broken, schema, schema)
+    assert errors[:2] == [
+        "$.input: missing frames",
+        "$.axes.gyro_y.ieee952.rate_ramp.unit: int is not ['string']",
+    ]
+    assert errors[2].startswith("$.axes.accel_x.effects[0].kind: 'gremlin' not in [")
     assert len(errors) == 3, errors
 
 
@@ -316,7 +295,10 @@ def test_allan_parquet_round_trips(written) -> None:
     result, _, out = written
     df = pl.read_parquet(out / "allan.parquet")
     assert df.columns[:9] == ["axis", "unit", "tau", "adev", "lo", "hi", "edf", "terms", "alpha"]
-    assert df.height == sum(a.curve.tau_s.size for a in result.axes.values())
+    for name, axis in result.axes.items():  # every axis' curve, tau by tau, in SI
+        rows = df.filter(pl.col("axis") == name)
+        np.testing.assert_array_equal(rows["tau"].to_numpy(), axis.curve.tau_s)
+        assert set(rows["unit"]) == {"rad/s" if name.startswith("gyro") else "m/s^2"}
     gz = df.filter(pl.col("axis") == "gyro_z")
     np.testing.assert_array_equal(gz["adev"].to_numpy(), result.axes["gyro_z"].curve.adev)
     ax = df.filter(pl.col("axis") == "accel_x")

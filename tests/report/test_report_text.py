@@ -281,3 +281,53 @@ def test_kalibr_block_fence_is_longer_than_any_backtick_run() -> None:
     assert plain.startswith("```yaml\n")
     # the yaml holds the worst axis' N in SI (no unit conversion in Kalibr files)
     assert f"gyroscope_noise_density: {GYRO_N[0]}" in plain
+
+
+def test_other_sources_and_a_users_datasheet() -> None:
+    from dataclasses import replace
+
+    from imupipe.report.datasheet import parse_datasheet
+
+    other = result()
+    other = replace(other, input=replace(other.input, source="sensor_msgs/msg/Imu"))
+    md = report_markdown(other, {})
+    # not the paper's part: no paper column, no default datasheet
+    assert "| quantity | axis | measured [95 % interval] | unit |" in md
+    assert _row(md, "Random walk N", "accel_x", "mg/√s")[2:] == [_interval(ACCEL_N, MG), "mg/√s"]
+    assert "Paper:" not in md and "Datasheet" not in md
+    sheet = parse_datasheet(
+        'part = "X1"\nsource = "x.pdf"\n[accel]\nN = { value = 30, unit = "mg/√Hz" }\n'
+        'B = { value = 0.2, unit = "mg" }\n',
+        "x.toml",
+    )
+    md = report_markdown(other, {}, sheet)
+    assert 'Datasheet "X1": "x.pdf".' in md
+    # a unit other than the paper's: a second row in the datasheet's unit (mg/√Hz = mg/√s)
+    assert _row(md, "Random walk N", "accel_y", "mg/√s")[2:] == [
+        _interval(ACCEL_N, MG),
+        "30",
+        "mg/√s",
+    ]
+    assert _row(md, "Random walk N", "accel_y", "mg/√Hz")[3] == "30"
+    # the same unit as the paper's: one row only; gyros: no datasheet value
+    assert sum(ln.startswith("| Bias instability B | accel_z |") for ln in md.splitlines()) == 1
+    assert _row(md, "Random walk N", "gyro_x", "°/√s")[3] == "—"
+    table = format_table(other, sheet)
+    assert table.splitlines()[1].split() == [
+        "quantity", "axis", "measured", "[95", "%", "interval]", "datasheet", "unit"
+    ]  # fmt: skip
+
+
+def test_duration_in_hours_and_one_sided_intervals() -> None:
+    from dataclasses import replace
+
+    r = result()
+    for seconds, text in ((4409.64, "4409.6 s (1.22 h)"), (4410.36, "4410.4 s (1.23 h)")):
+        r = replace(r, input=replace(r.input, duration_s=seconds))  # 1.2249 h, 1.2251 h
+        assert f"| {text} |" in report_markdown(r, {})
+        assert f", {text.split('(')[1][:-1]} analysed;" in format_table(r).splitlines()[0]
+    # a value whose interval has no lower end is shown without an interval
+    n = ieee952.NoiseTerm(2.0e-3, None, 2.1e-3, "m/s^2/sqrt(Hz)", None)
+    axis = r.axes["accel_y"]
+    r.axes["accel_y"] = replace(axis, terms=replace(axis.terms, random_walk=n))
+    assert _row(report_markdown(r, {}), "Random walk N", "accel_y", "mg/√s")[2] == fmt(2e-3 * MG)
