@@ -23,11 +23,12 @@ from imupipe.device.frame_schema import (
     PROFILE,
     SCHEMA_ENCODING,
     SCHEMA_NAME,
+    TAIL_SIZE,
     encode_frames,
     message_definition,
 )
 from imupipe.errors import ImupipeError, InputError
-from imupipe.io.decode import decode
+from imupipe.io.decode import decode, scan
 from imupipe.io.mcap_bulk import BulkWriter
 
 T0 = 1_700_000_000_000_000_000
@@ -59,10 +60,10 @@ def write_adis(
     block: FrameBlock,
     log_time: np.ndarray | None = None,
     meta: dict[str, str] | None = None,
-    bad_payloads: int = 0,
+    extra: tuple[np.ndarray, ...] = (),
 ) -> Path:
-    """An MCAP of ADIS16364 frames (as the recorder writes it, with a chosen log time), plus
-    ``bad_payloads`` messages one byte short on the same channel."""
+    """An MCAP of ADIS16364 frames (as the recorder writes it, with a chosen log time), plus a
+    chunk of raw payloads (n, size) on the same channel for each of ``extra``."""
     config = DeviceConfig()
     with open(path, "wb") as f:
         w = BulkWriter(f, profile=PROFILE)
@@ -73,9 +74,8 @@ def write_adis(
         payloads = encode_frames(block, "adis")
         times = block.stamp_ns if log_time is None else log_time
         w.write_chunk(cid, times, payloads, block.counter)
-        if bad_payloads:
-            short = payloads[:bad_payloads, :-1]
-            w.write_chunk(cid, times[:bad_payloads] + 1, np.ascontiguousarray(short))
+        for raw in extra:
+            w.write_chunk(cid, times[: len(raw)] + 1, np.ascontiguousarray(raw))
         w.finish()
     return path
 
@@ -170,10 +170,16 @@ def test_time_base_follows_the_more_monotonic_clock(
 def test_malformed_messages_are_counted_and_skipped(tmp_path: Path) -> None:
     n = 30
     block = _block(_counts(n), T0 + np.arange(n) * 10_000_000)
-    rec = decode(write_adis(tmp_path / "f.mcap", block, bad_payloads=4))
+    good = encode_frames(block, "adis")
+    # frame_id length 0 (a CDR string has at least its NUL), the fields right after it
+    no_nul = np.hstack([good[:2, :12], np.zeros((2, 4), np.uint8), good[:2, -TAIL_SIZE:]])
+    big_endian = good[:3].copy()
+    big_endian[:, 1] = 0
+    extra = (good[:4, :-1], no_nul, big_endian, good[:5, :8])  # the last: shorter than a header
+    rec = decode(write_adis(tmp_path / "f.mcap", block, extra=extra))
     assert rec.frames.height == n
     assert rec.warnings == [
-        f"{DEFAULT_TOPIC}: 4 malformed messages (size does not match the schema) skipped"
+        f"{DEFAULT_TOPIC}: 14 malformed messages (size does not match the schema) skipped"
     ]
 
 
@@ -230,9 +236,12 @@ def test_listed_paths_outside_the_bag_are_refused(tmp_path: Path, entry: str) ->
 TS = get_typestore(Stores.ROS2_HUMBLE)
 
 
-def _imu_bag(folder: Path, imu_topic: str, temps: dict[str, tuple[str, float]]) -> None:
+def _imu_bag(
+    folder: Path, imu_topic: str, temps: dict[str, tuple[str, float]], bad: int = -1
+) -> None:
     """100 Imu messages at 100 Hz on ``imu_topic`` (frame_id "imu_link"); each Temperature topic
-    of ``temps`` (topic -> (frame_id, offset °C)) at 10 Hz, offset + 0.1 °C per message."""
+    of ``temps`` (topic -> (frame_id, offset °C)) at 10 Hz, offset + 0.1 °C per message;
+    accel_y of message ``bad`` infinite, the covariance of the next one NaN."""
     T = TS.types
     header = lambda s, fid: T["std_msgs/msg/Header"](  # noqa: E731
         stamp=T["builtin_interfaces/msg/Time"](sec=s // 10**9, nanosec=s % 10**9), frame_id=fid
@@ -249,8 +258,8 @@ def _imu_bag(folder: Path, imu_topic: str, temps: dict[str, tuple[str, float]]) 
                 orientation_covariance=np.zeros(9),
                 angular_velocity=vec(x=0.001 * i, y=0.0, z=0.0),
                 angular_velocity_covariance=np.zeros(9),
-                linear_acceleration=vec(x=0.0, y=0.0, z=-G),
-                linear_acceleration_covariance=np.zeros(9),
+                linear_acceleration=vec(x=0.0, y=math.inf if i == bad else 0.0, z=-G),
+                linear_acceleration_covariance=np.full(9, np.nan if i == bad + 1 else 0.0),
             )
             w.write(imu, s, TS.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
             for t, (fid, offset) in temps.items():
@@ -270,6 +279,8 @@ def _imu_bag(folder: Path, imu_topic: str, temps: dict[str, tuple[str, float]]) 
         ("/imu/data", {"/board/temp": ("imu_link", 20.0), "/a/temp": ("other", 40.0)},
          "/board/temp"),
         ("/imu/data", {"/battery/temperature": ("bat", 40.0)}, None),
+        ("/imu", {"/temp": ("x", 20.0)}, "/temp"),  # both at the top level
+        ("/a/imu", {"/b/temp": ("x", 20.0)}, None),  # a sibling namespace is not its own
     ],
 )  # fmt: skip
 def test_imu_temperature_is_its_own_interpolated(
@@ -283,6 +294,7 @@ def test_imu_temperature_is_its_own_interpolated(
     assert f["accel_z"].to_list() == [-G] * 100
     assert f["counter"].null_count() == 100 and f["supply_v"].null_count() == 100
     assert f["flag_nd"].all() and not f["flag_ea"].any() and not f["saturated"].any()
+    assert f["diag_stat"].to_list() == [0] * 100
     if chosen is None:
         assert f["temp_c"].null_count() == 100
     else:  # linear between the 10 Hz readings, held after the last one
@@ -321,3 +333,57 @@ def test_what_is_not_a_recording(tmp_path: Path) -> None:
     (tmp_path / "notes" / "x.txt").write_text("x")
     with pytest.raises(InputError, match="notes: a directory without MCAP files"):
         decode(tmp_path / "notes")
+
+
+def test_imu_nonfinite_marks_the_bad_message(tmp_path: Path) -> None:
+    _imu_bag(tmp_path / "bag", "/imu", {}, bad=42)
+    f = decode(tmp_path / "bag", columns=frozenset({"nonfinite", "accel_z"})).frames
+    assert f.columns == ["accel_z", "nonfinite"]
+    assert f["nonfinite"].to_numpy().nonzero()[0].tolist() == [42]  # a NaN covariance is not
+
+
+def test_scan_in_memory_or_spilled(tmp_path: Path) -> None:
+    n = 40
+    log = T0 + np.arange(n) * 2_500_000
+    path = write_adis(tmp_path / "f.mcap", _block(_counts(n), np.zeros(n, np.int64)), log)
+    whole = decode(path).frames
+    # scan keeps both time bases unless told otherwise: the log time is there when needed
+    rec = scan(path).recording()
+    assert rec.time_source == "log_time" and rec.frames.equals(whole)
+    spill = tmp_path / "spill"
+    spill.mkdir()
+    scanned = scan(path, spill_dir=spill)
+    assert sorted(p.name for p in spill.iterdir()) == ["channel0"]
+    for _ in range(2):  # spilled columns can be read as often as wanted
+        assert scanned.recording().frames.equals(whole)
+    part = scanned.recording(frozenset({"t_s", "accel_x"})).frames
+    assert part.equals(whole.select("accel_x", "t_s"))
+
+
+def test_damage_is_reported_per_split_file(tmp_path: Path) -> None:
+    _split_bag(tmp_path / "a", ["bag_0.mcap", "bag_1.mcap"], None)
+    cut = tmp_path / "a" / "bag_1.mcap"
+    cut.write_bytes(cut.read_bytes()[:-40])  # footer and part of the summary gone
+    rec = decode(tmp_path / "a")
+    assert rec.frames.height == 20
+    assert rec.warnings and all(w.startswith("bag_1.mcap: ") for w in rec.warnings)
+    single = decode(cut)  # one file: no file name in front
+    assert single.warnings == [w.removeprefix("bag_1.mcap: ") for w in rec.warnings]
+
+
+def test_stamps_one_nanosecond_apart_are_increasing(tmp_path: Path) -> None:
+    n = 30
+    rec = _time_base(tmp_path, T0 + np.arange(n), T0 + np.arange(n) * 10_000_000)
+    assert rec.time_source == "header.stamp" and rec.warnings == []
+    np.testing.assert_allclose(rec.frames["t_s"].to_numpy(), np.arange(n) * 1e-9, rtol=1e-12)
+
+
+def test_keeping_one_time_base_gives_the_same_frame(tmp_path: Path) -> None:
+    n = 30
+    path = write_adis(tmp_path / "f.mcap", _block(_counts(n), T0 + np.arange(n) * 10_000_000))
+    whole = decode(path).frames
+    assert decode(path, keep_one_time_base=True).frames.equals(whole)
+    cols = frozenset({"t_s", "gyro_y"})
+    assert decode(path, columns=cols, keep_one_time_base=True).frames.equals(
+        whole.select("gyro_y", "t_s")
+    )
