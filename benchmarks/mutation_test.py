@@ -65,6 +65,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     "pipeline/report/report.py": ("tests/report/test_report_text.py", "tests/test_report.py"),
     "pipeline/report/exports.py": ("tests/report/test_exports_values.py", "tests/test_exports.py"),
     "pipeline/device/adis16364.py": (
+        "tests/device/test_adis16364_scales.py",
         "tests/test_adis16364.py",
         "tests/test_scale_factors.py",
         "tests/io/test_decode_contract.py",
