@@ -8,7 +8,7 @@ import math
 import re
 import subprocess
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +18,7 @@ from scipy.stats import chi2
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.device.frame_schema import SCHEMA_NAME
 from imupipe.model import ieee952
-from imupipe.model.loop import AcceptedEffect, Goodness, RejectedCandidate
+from imupipe.model.loop import AcceptedEffect, Goodness, LoopResult, RejectedCandidate
 from imupipe.report.rerun_view import rerun_executable
 from imupipe.stats import allan
 from imupipe.units import SI_UNIT, to_si
@@ -80,42 +80,6 @@ def _terms(sensor: str, n: float, b: float, k: float | None):
     )
 
 
-@dataclass
-class StandInLoop:
-    """Duck-typed stand-in for imupipe.model.loop.LoopResult (its contract, issue 4)."""
-
-    terms_before: object
-    terms_after: object
-    adev_after: np.ndarray
-    model_adev_before: np.ndarray
-    model_adev_after: np.ndarray
-    z_before: np.ndarray
-    z_after: np.ndarray
-    accepted: list[AcceptedEffect] = field(default_factory=list)
-    rejected: list[RejectedCandidate] = field(
-        default_factory=lambda: [RejectedCandidate("sinusoid", {}, {}, {}, "ΔBIC 2.1 < 10")]
-    )
-    before: Goodness | None = None
-
-    def as_model_dict(self) -> dict:
-        return {
-            "terms": {
-                "white": {"value": 2.8e-3, "lo": 2.7e-3, "hi": 2.9e-3, "unit": "m/s^2/sqrt(Hz)"},
-            },
-            "error_before": 4.2,
-            "error_after": 1.03,
-            "dof": 40,
-            "p_value_before": 0.0,
-            "p_value_after": 0.41,
-            "rms_z_before": 3.1,
-            "rms_z_after": 0.9,
-            "max_abs_z_before": 5.9,
-            "max_abs_z_after": 2.2,
-            "tau_max_abs_z_before": 4000.0,
-            "tau_max_abs_z_after": 80.0,
-        }
-
-
 def _synthetic_result(with_loop: bool = True) -> AnalysisResult:
     """Six axes with the paper's N and B as truth; a loop result on accel_x."""
     axes = {}
@@ -145,18 +109,22 @@ def _synthetic_result(with_loop: bool = True) -> AnalysisResult:
             error_before=4.2,
             error_after=1.03,
         )
+        z_after = rng.normal(0, 1, ax.curve.tau_s.size)
         axes["accel_x"] = dataclasses.replace(
             ax,
-            loop=StandInLoop(
-                terms_before=ax.terms,
-                terms_after=ax.terms,
+            loop=LoopResult(
+                name="accel_x",
+                tau_s=ax.curve.tau_s,
+                adev_before=ax.curve.adev,
                 adev_after=ax.curve.adev * 0.97,
+                terms_before=dataclasses.replace(ax.terms, deviance_per_dof=4.2),
+                terms_after=ax.terms,
                 model_adev_before=ax.curve.adev * 0.9,
                 model_adev_after=ax.curve.adev,
-                z_before=z_before,
-                z_after=rng.normal(0, 1, ax.curve.tau_s.size),
-                accepted=[effect],
                 before=Goodness(4.2, 168.0, 40, 0.0, z_before, 5.9, 4000.0, 3.1, 4),
+                after=Goodness(1.03, 39.14, 38, 0.41, z_after, 2.2, 80.0, 0.9, 0),
+                accepted=[effect],
+                rejected=[RejectedCandidate("sinusoid", {}, {}, {}, "ΔBIC 2.1 < 10")],
             ),
         )
     inp = InputSummary(

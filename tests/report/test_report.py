@@ -81,8 +81,14 @@ def test_report_json_matches_schema_and_contract(written) -> None:
     assert gyro["allan"]["tau_s"] == curve.tau_s.tolist()
     assert gyro["allan"]["adev"] == curve.adev.tolist()
     accel = on_disk["axes"]["accel_x"]
-    # the loop's errors reach report.json unchanged (the stand-in's 4.2 -> 1.03)
-    assert (accel["model"]["error_before"], accel["model"]["error_after"]) == (4.2, 1.03)
+    # the model block of a looped axis: the FINAL model's terms (SI, with units) and the
+    # goodness before -> after, in that order, with the dof of the final fit
+    model = accel["model"]
+    assert model["terms"]["random_walk"]["value"] == pytest.approx(to_si(0.29, "mg/√s"))
+    assert model["terms"]["random_walk"]["unit"] == "m/s^2/sqrt(Hz)"
+    assert "reason" not in model["terms"]["random_walk"]
+    assert (model["error_before"], model["error_after"], model["dof"]) == (4.2, 1.03, 38)
+    assert (model["tau_max_abs_z_before"], model["tau_max_abs_z_after"]) == (4000.0, 80.0)
     assert accel["effects"][0]["kind"] == "temperature"
     assert "model" not in on_disk["axes"]["accel_y"]
 
@@ -94,7 +100,13 @@ def test_schema_check_catches_broken_reports(written) -> None:
     del broken["input"]["frames"]
     broken["axes"]["gyro_y"]["ieee952"]["rate_ramp"]["unit"] = 3
     broken["axes"]["accel_x"]["effects"][0]["kind"] = "gremlin"
+    # the shipped schema rejects each of the three breakages, where it is
     errors = schema_errors(broken, schema, schema)
+    assert errors[:2] == [
+        "$.input: missing frames",
+        "$.axes.gyro_y.ieee952.rate_ramp.unit: int is not ['string']",
+    ]
+    assert errors[2].startswith("$.axes.accel_x.effects[0].kind: 'gremlin' not in [")
     assert len(errors) == 3, errors
 
 
@@ -163,7 +175,10 @@ def test_allan_parquet_round_trips(written) -> None:
     result, _, out = written
     df = pl.read_parquet(out / "allan.parquet")
     assert df.columns[:9] == ["axis", "unit", "tau", "adev", "lo", "hi", "edf", "terms", "alpha"]
-    assert df.height == sum(a.curve.tau_s.size for a in result.axes.values())
+    for name, axis in result.axes.items():  # every axis' curve, tau by tau, in SI
+        rows = df.filter(pl.col("axis") == name)
+        np.testing.assert_array_equal(rows["tau"].to_numpy(), axis.curve.tau_s)
+        assert set(rows["unit"]) == {"rad/s" if name.startswith("gyro") else "m/s^2"}
     gz = df.filter(pl.col("axis") == "gyro_z")
     np.testing.assert_array_equal(gz["adev"].to_numpy(), result.axes["gyro_z"].curve.adev)
     ax = df.filter(pl.col("axis") == "accel_x")
