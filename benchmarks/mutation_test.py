@@ -13,11 +13,14 @@ Usage (from the repository root, in the project's virtualenv with ``pip install 
 
     python benchmarks/mutation_test.py pipeline/units.py pipeline/vocab.py
     python benchmarks/mutation_test.py pipeline/stats/edf.py --functions edf_overlapping --no-jit
+    python benchmarks/mutation_test.py pipeline/stats/robust.py --sample 40
     python benchmarks/mutation_test.py pipeline/units.py --session /tmp/imupipe-mutation-XXXX
     python benchmarks/mutation_test.py --list
 
 ``--session`` resumes a session (printed at the start of a run) and re-tests only its survivors,
-after tests were added to kill them.
+after tests were added to kill them.  ``--sample N`` runs a uniformly random N of the selected
+mutants (seeded by ``--seed``) and skips the rest: the killed fraction of a random sample is an
+unbiased estimate of the module's score (binomial standard error sqrt(p (1 - p) / N)).
 
 Prints, per module: mutants, killed, survived, timeouts (counted as killed), skipped (outside
 ``--functions``, or a float -> bit-operator swap unless ``--all-operators``) and the diff of
@@ -38,6 +41,8 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -132,9 +137,12 @@ def run_module(
     timeout: float,
     env: dict[str, str],
     resume: Path | None = None,
+    sample: int | None = None,
+    seed: int = 0,
 ) -> Score:
     """Initialise, filter and execute one cosmic-ray session (or resume the one in ``resume``,
-    re-testing its survivors); return the counts."""
+    re-testing its survivors); return the counts.  ``sample``: run only a random ``sample`` of
+    the selected mutants (``seed``), skipping the others."""
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import WorkerOutcome, WorkResult
 
@@ -178,6 +186,14 @@ def run_module(
             db.set_multiple_results(
                 drop, WorkResult(worker_outcome=WorkerOutcome.SKIPPED, output="not selected")
             )
+        selected = sorted(item.job_id for item in db.pending_work_items)
+        if sample is not None and sample < len(selected):
+            chosen = set(np.random.default_rng(seed).choice(selected, sample, replace=False))
+            unsampled = [job for job in selected if job not in chosen]
+            db.set_multiple_results(
+                unsampled, WorkResult(worker_outcome=WorkerOutcome.SKIPPED, output="not sampled")
+            )
+            print(f"{module}: a random {sample} of {len(selected)} selected mutants", flush=True)
     return _execute(module, config, session, env)
 
 
@@ -229,6 +245,10 @@ def main() -> None:
         help="resume the session directory printed by an earlier run of ONE module, re-testing "
         "its survivors (after adding tests)",
     )
+    parser.add_argument(
+        "--sample", type=int, help="run a random N of the selected mutants (skip the rest)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of --sample's choice")
     parser.add_argument("--list", action="store_true", help="print the module -> tests map")
     args = parser.parse_args()
     if args.list or not args.modules:
@@ -245,7 +265,16 @@ def main() -> None:
     if args.session is not None and len(args.modules) != 1:
         raise SystemExit("--session resumes the run of one module")
     scores = [
-        run_module(m, functions, args.all_operators, args.timeout, env, args.session)
+        run_module(
+            m,
+            functions,
+            args.all_operators,
+            args.timeout,
+            env,
+            args.session,
+            args.sample,
+            args.seed,
+        )
         for m in args.modules
     ]
     print("\nmodule                              mutants killed survived timeouts skipped score")
