@@ -206,3 +206,25 @@ def test_asymptote_caps_written_out() -> None:
     caps = ieee952.asymptote_caps(tau, np.array([1.0, 1.0, 1.0, np.nan]), 2.0)
     np.testing.assert_allclose(caps, [4 / 3, 2.0, 1 / PLATEAU_AVAR, 0.75, 0.125], rtol=1e-12)
     assert np.all(ieee952.asymptote_caps(tau, np.full(4, np.nan), 2.0) == np.inf)
+
+
+def test_negative_short_term_is_reported_as_the_prefilter_with_its_interval() -> None:
+    """AVAR = N²/τ − C/τ² (white noise through a low-pass prefilter, module doc) with gamma
+    scatter: the 1/τ² column's sign is −1, Q is masked, C = 3 × its coefficient, and the
+    reason states −C/τ² with the 95 % interval of C (3 × the profile interval's ends)."""
+    n2, c = 1e-6, 2e-9
+    tau = 0.04 * 2.0 ** np.arange(16)
+    edf = 1e5 / 2.0 ** np.arange(16) + 3.0
+    avar = (n2 / tau - c / tau**2) * np.random.default_rng(8).chisquare(edf) / edf
+    fit = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf, prefilter=True)
+    assert fit.short_sign == -1
+    terms = ieee952.terms_from_fit(fit, avar, edf, "gyro")
+    lo, hi = fit.profile_interval(avar, edf, 0)
+    assert 3 * lo < c < 3 * hi
+    assert terms.prefilter_avar_s2 == pytest.approx(3 * fit.coef[0], rel=1e-12)
+    assert terms.prefilter_avar_s2 == pytest.approx(c, rel=0.2)
+    q = terms.quantization
+    assert q.value is None and q.lo is None and q.hi is None and q.unit == "rad"
+    assert f"(-{3 * fit.coef[0]:.3g}/tau^2, 95 % [{3 * lo:.3g}, {3 * hi:.3g}])" in q.reason
+    assert terms.random_walk.value == pytest.approx(np.sqrt(n2), rel=0.01)
+    np.testing.assert_allclose(terms.avar(tau), n2 / tau - 3 * fit.coef[0] / tau**2, rtol=0.02)

@@ -89,11 +89,30 @@ def test_factor_limits() -> None:
     adev, n_terms = oadev(np.arange(10.0) % 3, 1.0, np.array([5]))
     assert n_terms[0] == 1 and np.isfinite(adev[0])
     for bad in ([0, 1], []):
-        with pytest.raises(ValueError, match=r"must lie in 1\.\.5"):
+        with pytest.raises(ValueError, match=r"must lie in 1\.\.5$"):
             oadev(np.zeros(10), 1.0, np.array(bad, dtype=np.int64))
     np.testing.assert_array_equal(tau_factors(4), [1])
     np.testing.assert_array_equal(tau_factors(43), [1, 2, 3, 4, 5, 6, 7, 8, 9, 10])
     np.testing.assert_array_equal(tau_factors(100, per_decade=2), [1, 3, 10])
+    np.testing.assert_array_equal(tau_factors(400, per_decade=1), [1, 10, 100])  # m_max = 10²
     (curve,) = allan_curves(np.random.default_rng(1).standard_normal(43), 0.5)
     np.testing.assert_array_equal(curve.n_terms, 44 - 2 * np.arange(1, 11))
     np.testing.assert_allclose(curve.tau_s, 0.5 * np.arange(1, 11))
+
+
+@pytest.mark.parametrize("gap", [False, True])
+def test_correction_reads_only_its_own_entries(gap: bool) -> None:
+    """A correction whose arrays are slices of longer ones (as ``within`` returns) subtracts
+    only its own entries: the element after its last index (3001, value 1e3) is never read."""
+    rng = np.random.default_rng(22)
+    y = rng.standard_normal(4_000)
+    index, value = np.array([5, 1_100, 2_500, 3_001]), np.array([40.0, -7.0, 25.0, 1e3])
+    fix = SparseCorrection(index[:3], value[:3])
+    clean = y.copy()
+    clean[index[:3]] -= value[:3]
+    excluded = np.zeros(4_000, dtype=bool)
+    if gap:
+        excluded[1_500:1_700] = True
+    m = np.array([1, 10, 300])
+    got = oadev(y, 0.01, m, fix, excluded if gap else None)[0]
+    np.testing.assert_allclose(got, oadev(clean, 0.01, m, excluded=excluded)[0], rtol=1e-10)
