@@ -144,6 +144,7 @@ def test_profile_interval_ends_are_a_chi2_95_deviance_drop(seed: int, scatter: f
     assert _profile_rise(fit, avar, edf, 4, hi) == pytest.approx(CHI2_1_95, rel=1e-3)
     # the reported terms are the square roots of those ends
     terms = ieee952.terms_from_fit(fit, avar, edf, "gyro")
+    assert terms.deviance_per_dof == pytest.approx(fit.deviance / 13, rel=1e-12)
     lo, hi = fit.profile_interval(avar, edf, 3)
     k = terms.rate_random_walk
     assert (k.lo, k.value, k.hi) == pytest.approx(

@@ -80,3 +80,32 @@ def test_chi2_interval_default_is_stable32s_68_3_percent() -> None:
     lo, hi = edf.chi2_interval(np.array([1.0]), np.array([10.0]))
     lo2, hi2 = edf.chi2_interval(np.array([1.0]), np.array([10.0]), 0.683)
     assert (lo[0], hi[0]) == (lo2[0], hi2[0])
+
+
+@pytest.mark.parametrize("count", [30, 41, 200])
+def test_acf_removes_a_linear_frequency_drift_exactly(count: int) -> None:
+    """Riley & Greenhall 2004 §3: the linear drift is removed before the lag-1 ACF (normal
+    equations, Σt'² = L (L² − 1) / 12): a drift 1e4 times the noise changes no identification
+    of white FM, white PM or random-walk FM records."""
+    rng = np.random.default_rng(count)
+    drift = 1e4 * np.arange(count) + 3e4
+    for make in (lambda w: w[1:], np.diff, np.cumsum):
+        for _ in range(5):
+            y = make(rng.standard_normal(count + 1))[:count]
+            assert edf.acf_noise_id(y + drift) == edf.acf_noise_id(y)
+
+
+def test_long_series_branch_differences_at_most_twice(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Series longer than ACF_COPY_MAX are read from the phase on the fly, with the same
+    dmax = 2 as the copy: a record whose second difference is still red (δ ≥ 0.25) but whose
+    third would be anticorrelated (a slow sinusoid plus a period-2 term, integrated twice) is
+    identified alike by both branches (α = −2, clipped), not as white PM after a third
+    difference."""
+    t = np.arange(3_000)
+    s = 10 * np.sin(2 * np.pi * t / 100) + (-1.0) ** t
+    y = np.cumsum(np.cumsum(s))
+    x = np.concatenate([[0.0], np.cumsum(y)])  # phase: u_t = x[t + 1] - x[t] = y_t
+    copied = edf.noise_ids(x, np.array([1]))
+    monkeypatch.setattr(edf, "ACF_COPY_MAX", 0)
+    np.testing.assert_array_equal(edf.noise_ids(x, np.array([1])), copied)
+    np.testing.assert_array_equal(copied, [-2])
