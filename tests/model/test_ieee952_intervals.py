@@ -229,3 +229,24 @@ def test_negative_short_term_is_reported_as_the_prefilter_with_its_interval() ->
     assert f"(-{3 * fit.coef[0]:.3g}/tau^2, 95 % [{3 * lo:.3g}, {3 * hi:.3g}])" in q.reason
     assert terms.random_walk.value == pytest.approx(np.sqrt(n2), rel=0.01)
     np.testing.assert_allclose(terms.avar(tau), n2 / tau - 3 * fit.coef[0] / tau**2, rtol=0.02)
+
+
+def test_fit_start_drops_short_tau_points_that_break_the_model() -> None:
+    """AVAR = N²/τ except its first two octave points, 3× too high (a sensor filter): the
+    deletion test at its default level 0.999 starts the fit at the third point, 0.04 s."""
+    tau = 0.01 * 2.0 ** np.arange(16)
+    avar = 1e-6 / tau
+    avar[:2] *= 3.0
+    tau_min, note = ieee952.fit_start(tau, avar, np.full_like(tau, 1e4))
+    assert tau_min == 0.04
+    assert "tau = 0.01, 0.02 s left out" in note
+    assert ieee952.fit_start(tau, 1e-6 / tau, np.full_like(tau, 1e4))[0] == 0.01
+
+
+def test_degrees_of_freedom_are_points_minus_parameters() -> None:
+    """dof = fitted octave points − 5 terms (− 1 for a profiled finite cut-off), at least 1."""
+    for points, want in ((8, 3), (6, 1), (4, 1)):
+        tau = 0.01 * 2.0 ** np.arange(points)
+        avar = ieee952.avar_model(tau, random_walk=1e-3, rate_random_walk=1e-5)
+        fit = ieee952.fit_composite(tau, avar, np.full_like(tau, 1e3), cutoff_hz=np.inf)
+        assert fit.dof == want, points
