@@ -83,12 +83,24 @@ def test_interval_coverage_over_seeds(synth_rate, paper_gyro):
 
 
 def test_short_white_record_leaves_rrw_unresolved(synth_rate, paper_gyro):
+    """K unresolved on 11 min of white noise; its upper bound is the K whose asymptote K²τ/3
+    touches the measured AVAR's 95 % upper bound avar·ν/χ²_ν(0.025) (scipy.stats) on the fitted
+    range (that cap is below the profile bound on this record)."""
+    from scipy.stats import chi2
+
     tau0, n = 0.01, 2**16
     y = synth_rate(n, tau0, np.random.default_rng(7), paper_gyro.n)
-    terms = ieee952.fit_noise_terms(allan_curves(y, tau0)[0], "gyro")
+    curve = allan_curves(y, tau0)[0]
+    terms = ieee952.fit_noise_terms(curve, "gyro")
     assert terms.random_walk.lo < paper_gyro.n < terms.random_walk.hi
-    assert terms.rate_random_walk.value is None
-    assert terms.rate_random_walk.hi > 0
+    k = terms.rate_random_walk
+    assert k.value is None and k.lo is None
+    assert "asymptote reaches the measured deviation's upper confidence bound" in k.reason
+    edf = np.minimum.accumulate(curve.edf)
+    avar_hi = curve.adev**2 * edf / chi2.ppf(0.025, edf)
+    fitted = curve.tau_s >= terms.fit_tau_min_s
+    touch = np.max(k.hi**2 * curve.tau_s[fitted] / 3 / avar_hi[fitted])
+    assert touch == pytest.approx(1.0, rel=1e-9)
 
 
 def filtered_white_avar(h: np.ndarray, m: np.ndarray) -> np.ndarray:

@@ -1,0 +1,252 @@
+"""IEEE 952 terms against values written out by hand, and 95 % profile-likelihood intervals
+whose deviance drop is exactly χ²₁(0.95) (not an ~83 % interval with a drop of 1.88).
+
+The read-off points of each term on a log-log ADEV plot (IEEE Std 952-1997 Annex C; El-Sheimy,
+Hou & Niu 2008, Table 1): N = σ(1 s), K = σ(3 s), R = σ(√2 s), Q = σ(√3 s), and the flicker
+plateau σ = √(2 ln 2 / π) B = 0.6643 B.  Small SI values are compared with ``abs=0``
+(``pytest.approx`` otherwise allows 1e-12 absolute).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import integrate
+
+from imupipe.model import ieee952
+
+CHI2_1_95 = 3.841458820694124  # χ²₁ 95 % quantile (Abramowitz & Stegun 26.8: 3.841)
+PLATEAU_FACTOR = 0.664282470267960  # √(2 ln 2 / π): the bias-instability plateau per unit B
+PLATEAU_AVAR = 0.441271200305303  # 2 ln 2 / π
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "tau"),
+    [
+        ("random_walk", 8.7e-4, 1.0),  # N = σ(1 s), rad/s/√Hz
+        ("rate_random_walk", 2.0e-6, 3.0),  # K = σ(3 s), rad/s²/√Hz
+        ("rate_ramp", 3.0e-7, np.sqrt(2.0)),  # R = σ(√2 s), rad/s²
+        ("quantization", 4.0e-6, np.sqrt(3.0)),  # Q = σ(√3 s), rad
+    ],
+)
+def test_each_term_reads_off_at_its_textbook_tau(name: str, value: float, tau: float) -> None:
+    adev = np.sqrt(ieee952.avar_model(np.array([tau]), **{name: value}))[0]
+    assert adev == pytest.approx(value, rel=1e-14, abs=0)
+
+
+def test_bias_instability_plateau_is_0664_b() -> None:
+    b = 1.4e-4
+    tau = np.array([0.01, 1.0, 1e4])
+    adev = np.sqrt(ieee952.avar_model(tau, bias_instability=b))
+    np.testing.assert_allclose(adev, PLATEAU_FACTOR * b, rtol=1e-14, atol=0)
+    # with a finite cut-off the plateau is reached at long τ only (x = π f0 τ → ∞)
+    far = np.sqrt(ieee952.avar_model(np.array([1e7]), bias_instability=b, cutoff_hz=1.0))[0]
+    assert far == pytest.approx(PLATEAU_FACTOR * b, rel=1e-6, abs=0)
+    assert ieee952.flicker_limit(np.array([np.nan, 2.0, 0.5, np.inf])) == pytest.approx(
+        0.5 / PLATEAU_AVAR, rel=1e-14
+    )
+    assert ieee952.flicker_limit(np.array([np.nan])) == np.inf
+
+
+def test_design_columns_written_out() -> None:
+    """AVAR per unit squared coefficient at τ = 2 s and 0.01 s: 3/τ², 1/τ, 2 ln2/π, τ/3, τ²/2."""
+    got = ieee952.design_columns(np.array([2.0, 0.01]))
+    want = [
+        [0.75, 0.5, PLATEAU_AVAR, 2.0 / 3.0, 2.0],
+        [30000.0, 100.0, PLATEAU_AVAR, 0.01 / 3.0, 5e-5],
+    ]
+    np.testing.assert_allclose(got, want, rtol=1e-14, atol=0)
+    # Q = 2e-6 rad: 3 Q²/τ² = 1.2e-7, 1.2e-9 and 1.2e-13 rad²/s² at τ = 0.01, 0.1, 10 s
+    q_only = ieee952.avar_model(np.array([0.01, 0.1, 10.0]), quantization=2e-6)
+    np.testing.assert_allclose(q_only, [1.2e-7, 1.2e-9, 1.2e-13], rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize(("f0", "tau"), [(0.5, 0.005 / np.pi), (0.5, 0.02 / np.pi), (2.0, 0.3)])
+def test_flicker_shape_small_and_exact_branches_equal_the_psd_integral(f0, tau):
+    """(2/π)·F(π f0 τ) = 4∫₀^f0 S(f) sin⁴(πfτ)/(πfτ)² df, S = 1/(2πf): below x = 0.01 (series)
+    and above it (closed form)."""
+    want, _ = integrate.quad(
+        lambda f: 4 / (2 * np.pi * f) * np.sin(np.pi * f * tau) ** 4 / (np.pi * f * tau) ** 2,
+        0,
+        f0,
+        limit=500,
+        epsrel=1e-12,
+        epsabs=0,
+    )
+    got = ieee952.flicker_shape(np.array([tau]), f0)[0]
+    assert got == pytest.approx(want, rel=1e-7, abs=0)
+
+
+def test_fit_recovers_all_five_terms_from_a_hand_written_curve() -> None:
+    """AVAR written from the textbook asymptotes (not from avar_model): every term, including
+    R and a positive quantisation term, is recovered with its SI unit."""
+    q, n, b, k, r = 1e-4, 8.7e-4, 1.4e-4, 2e-6, 1e-7
+    tau = 0.01 * 2.0 ** np.arange(21)
+    avar = 3 * q**2 / tau**2 + n**2 / tau + PLATEAU_AVAR * b**2 + k**2 * tau / 3 + r**2 * tau**2 / 2
+    edf = np.full_like(tau, 1e4)
+    fit = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf, prefilter=True)
+    assert fit.short_sign == 1
+    for sensor, units in (
+        ("gyro", ("rad", "rad/s/sqrt(Hz)", "rad/s", "rad/s^2/sqrt(Hz)", "rad/s^2")),
+        ("accel", ("m/s", "m/s^2/sqrt(Hz)", "m/s^2", "m/s^3/sqrt(Hz)", "m/s^3")),
+    ):
+        terms = ieee952.terms_from_fit(fit, avar, edf, sensor)
+        for name, value, unit in zip(ieee952.TERM_NAMES, (q, n, b, k, r), units, strict=True):
+            term = getattr(terms, name)
+            assert term.value == pytest.approx(value, rel=1e-4, abs=0), name
+            assert term.lo < value < term.hi, name
+            assert term.unit == unit and term.reason is None
+    assert terms.fit_tau_min_s == 0.01 and terms.fit_tau_max_s == tau[-1]
+    np.testing.assert_allclose(terms.adev(tau), np.sqrt(avar), rtol=1e-4)
+
+
+def _noisy_octave_curve(seed: int, scatter: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An octave AVAR curve of N + B + K with gamma scatter ``scatter`` times the one its edf
+    implies (scatter > 1: a misfit, D/dof > 1), and no rate ramp."""
+    rng = np.random.default_rng(seed)
+    tau = 0.01 * 2.0 ** np.arange(18)
+    edf = 4e6 / 2.0 ** np.arange(18) + 3.0
+    model = ieee952.avar_model(tau, random_walk=1e-3, bias_instability=2e-4, rate_random_walk=4e-5)
+    shape = edf / scatter**2
+    return tau, model * rng.chisquare(shape) / shape, edf
+
+
+def _profile_rise(fit: ieee952.CompositeFit, avar, edf, j: int, c: float) -> float:
+    """Deviance of the best fit with coefficient j held at ``c`` (others refitted), minus the
+    best fit's, in units of the dispersion φ."""
+    x, a, nu = fit.design[fit.fit_index], avar[fit.fit_index], edf[fit.fit_index]
+    held = ieee952.fit_nonneg_gamma(np.delete(x, j, axis=1), a, nu, c * x[:, j])[1]
+    return (held - fit.deviance) / fit.dispersion
+
+
+@pytest.mark.parametrize(("seed", "scatter"), [(3, 1.0), (2, 2.0)])
+def test_profile_interval_ends_are_a_chi2_95_deviance_drop(seed: int, scatter: float) -> None:
+    """Both ends of every resolved coefficient's interval lie where the profile deviance has
+    risen by exactly φ·χ²₁(0.95) = φ·3.841458820694124, φ = max(1, D/dof); an unresolved
+    coefficient (R, absent) has lo = 0 with a rise at 0 below that limit."""
+    tau, avar, edf = _noisy_octave_curve(seed, scatter)
+    fit = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf)
+    assert fit.dof == 18 - 5
+    if scatter == 1.0:
+        assert fit.deviance / fit.dof < 1.0 and fit.dispersion == 1.0
+    else:
+        assert fit.deviance / fit.dof > 2.0
+        assert fit.dispersion == fit.deviance / fit.dof
+    for j in (1, 2, 3):  # N, B, K: resolved
+        lo, hi = fit.profile_interval(avar, edf, j)
+        assert 0 < lo < fit.coef[j] < hi
+        for end in (lo, hi):
+            rise = _profile_rise(fit, avar, edf, j, end)
+            assert rise == pytest.approx(CHI2_1_95, rel=1e-3), (j, end)
+    lo, hi = fit.profile_interval(avar, edf, 4)
+    assert lo == 0.0 and fit.coef[4] < hi
+    assert _profile_rise(fit, avar, edf, 4, 0.0) < CHI2_1_95
+    assert _profile_rise(fit, avar, edf, 4, hi) == pytest.approx(CHI2_1_95, rel=1e-3)
+    # the reported terms are the square roots of those ends
+    terms = ieee952.terms_from_fit(fit, avar, edf, "gyro")
+    assert terms.deviance_per_dof == pytest.approx(fit.deviance / 13, rel=1e-12)
+    lo, hi = fit.profile_interval(avar, edf, 3)
+    k = terms.rate_random_walk
+    assert (k.lo, k.value, k.hi) == pytest.approx(
+        (np.sqrt(lo), np.sqrt(fit.coef[3]), np.sqrt(hi)), rel=1e-12
+    )
+    assert terms.rate_ramp.value is None and terms.rate_ramp.hi == pytest.approx(
+        np.sqrt(fit.profile_interval(avar, edf, 4)[1]), rel=1e-12
+    )
+
+
+def _fit_stub(deviance: float, dof: int) -> ieee952.CompositeFit:
+    tau = np.array([1.0, 2.0, 4.0, 8.0])
+    return ieee952.CompositeFit(
+        ieee952.TERM_NAMES,
+        np.zeros(5),
+        ieee952.design_columns(tau),
+        np.array([1, 2]),
+        deviance,
+        dof,
+        np.inf,
+    )
+
+
+def test_goodness_of_fit_dispersion_and_range() -> None:
+    """p = P(χ²_dof ≥ D) (χ²₁₀(0.95) = 18.307: p = 0.05), φ = max(1, D/dof), fitted τ range."""
+    assert _fit_stub(18.307038053275146, 10).p_value == pytest.approx(0.05, rel=1e-9)
+    assert _fit_stub(30.0, 10).dispersion == 3.0
+    assert _fit_stub(5.0, 10).dispersion == 1.0
+    assert _fit_stub(5.0, 0).dispersion == 5.0  # dof floored at 1
+    assert _fit_stub(1.0, 10).tau_range == (2.0, 4.0)
+    bad = ieee952._adequacy(_fit_stub(40.0, 10))
+    assert "D/dof = 4" in bad and "sqrt(D/dof) = 2" in bad
+    assert ieee952._adequacy(_fit_stub(18.307038053275146, 10)) is None
+
+
+def test_small_helpers_written_out() -> None:
+    # avar·ν/χ²_ν(0.025), χ²₁₀(0.025) = 3.2469727802368413 (A&S 26.8: 3.247)
+    got = ieee952.avar_upper(np.array([1.0, 2.0]), np.array([10.0, 10.0]))
+    np.testing.assert_allclose(got, [10 / 3.2469727802368413, 20 / 3.2469727802368413], rtol=1e-9)
+    # per-point deviance ν (r − ln r − 1) and the signed residual
+    np.testing.assert_allclose(
+        ieee952.deviance_residuals(np.array([2.0, 0.5, 1.0]), np.ones(3), np.full(3, 10.0)),
+        [1.7517214945306077, -1.389774012420528, 0.0],
+        rtol=1e-12,
+    )
+    np.testing.assert_array_equal(
+        ieee952.octave_index(np.array([1, 1.5, 2 * (1 - 1e-10), 3, 4, 7, 8, 16.0])), [0, 2, 4, 6, 7]
+    )
+    np.testing.assert_array_equal(ieee952.monotone_edf([5, 3, 4, 1, 2]), [5, 3, 3, 1, 1])
+    grid = ieee952.cutoff_grid(np.array([0.01, 1.0, 100.0]))
+    assert grid.size == 26 and grid[-1] == np.inf
+    assert grid[0] == pytest.approx(5e-4, rel=1e-12) and grid[24] == pytest.approx(1e3, rel=1e-12)
+
+
+def test_asymptote_caps_written_out() -> None:
+    """Each term's largest squared coefficient whose asymptote stays under the bound 1 at
+    τ ≥ 2 s (τ = 1 s ignored, NaN bounds ignored): Q² = 4/3, N² = 2, B² = π/(2 ln 2),
+    K² = 3/4, R² = 1/8."""
+    tau = np.array([1.0, 2.0, 4.0, 8.0])
+    caps = ieee952.asymptote_caps(tau, np.array([1.0, 1.0, 1.0, np.nan]), 2.0)
+    np.testing.assert_allclose(caps, [4 / 3, 2.0, 1 / PLATEAU_AVAR, 0.75, 0.125], rtol=1e-12)
+    assert np.all(ieee952.asymptote_caps(tau, np.full(4, np.nan), 2.0) == np.inf)
+
+
+def test_negative_short_term_is_reported_as_the_prefilter_with_its_interval() -> None:
+    """AVAR = N²/τ − C/τ² (white noise through a low-pass prefilter, module doc) with gamma
+    scatter: the 1/τ² column's sign is −1, Q is masked, C = 3 × its coefficient, and the
+    reason states −C/τ² with the 95 % interval of C (3 × the profile interval's ends)."""
+    n2, c = 1e-6, 2e-9
+    tau = 0.04 * 2.0 ** np.arange(16)
+    edf = 1e5 / 2.0 ** np.arange(16) + 3.0
+    avar = (n2 / tau - c / tau**2) * np.random.default_rng(8).chisquare(edf) / edf
+    fit = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf, prefilter=True)
+    assert fit.short_sign == -1
+    terms = ieee952.terms_from_fit(fit, avar, edf, "gyro")
+    lo, hi = fit.profile_interval(avar, edf, 0)
+    assert 3 * lo < c < 3 * hi
+    assert terms.prefilter_avar_s2 == pytest.approx(3 * fit.coef[0], rel=1e-12)
+    assert terms.prefilter_avar_s2 == pytest.approx(c, rel=0.2)
+    q = terms.quantization
+    assert q.value is None and q.lo is None and q.hi is None and q.unit == "rad"
+    assert f"(-{3 * fit.coef[0]:.3g}/tau^2, 95 % [{3 * lo:.3g}, {3 * hi:.3g}])" in q.reason
+    assert terms.random_walk.value == pytest.approx(np.sqrt(n2), rel=0.01)
+    np.testing.assert_allclose(terms.avar(tau), n2 / tau - 3 * fit.coef[0] / tau**2, rtol=0.02)
+
+
+def test_fit_start_drops_short_tau_points_that_break_the_model() -> None:
+    """AVAR = N²/τ except its first two octave points, 3× too high (a sensor filter): the
+    deletion test at its default level 0.999 starts the fit at the third point, 0.04 s."""
+    tau = 0.01 * 2.0 ** np.arange(16)
+    avar = 1e-6 / tau
+    avar[:2] *= 3.0
+    tau_min, note = ieee952.fit_start(tau, avar, np.full_like(tau, 1e4))
+    assert tau_min == 0.04
+    assert "tau = 0.01, 0.02 s left out" in note
+    assert ieee952.fit_start(tau, 1e-6 / tau, np.full_like(tau, 1e4))[0] == 0.01
+
+
+def test_degrees_of_freedom_are_points_minus_parameters() -> None:
+    """dof = fitted octave points − 5 terms (− 1 for a profiled finite cut-off), at least 1."""
+    for points, want in ((8, 3), (6, 1), (4, 1)):
+        tau = 0.01 * 2.0 ** np.arange(points)
+        avar = ieee952.avar_model(tau, random_walk=1e-3, rate_random_walk=1e-5)
+        fit = ieee952.fit_composite(tau, avar, np.full_like(tau, 1e3), cutoff_hz=np.inf)
+        assert fit.dof == want, points
