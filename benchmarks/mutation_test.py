@@ -49,6 +49,14 @@ TESTS: dict[str, tuple[str, ...]] = {
     "pipeline/stats/edf.py": ("tests/test_edf.py",),
     "pipeline/stats/robust.py": ("tests/test_robust.py",),
     "pipeline/analysis/condition.py": ("tests/test_condition.py",),
+    # the rule tests first (fast; -x stops at the first failure); tests/test_loop_sim.py (six
+    # 3 h axes per scenario, minutes) is left out of the per-mutant run for time
+    "pipeline/model/loop.py": ("tests/model/test_loop_rules.py", "tests/test_loop.py"),
+    "pipeline/model/effects.py": (
+        "tests/model/test_loop_rules.py",
+        "tests/test_effects_full_rate.py",
+        "tests/test_loop.py",
+    ),
     "pipeline/io/decode.py": ("tests/test_scale_factors.py", "tests/test_ros_bags.py"),
     "pipeline/recording/recorder.py": ("tests/test_mcap_io.py", "tests/test_recorder_signals.py"),
     "pipeline/report/report.py": ("tests/test_report.py",),
