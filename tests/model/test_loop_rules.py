@@ -32,7 +32,7 @@ from functools import cache
 
 import numpy as np
 import pytest
-from scipy import optimize
+from scipy import optimize, stats
 
 from imupipe.model import effects, ieee952
 from imupipe.model.loop import (
@@ -46,6 +46,7 @@ from imupipe.model.loop import (
     _judge,
     aux_block_means,
     close_loop,
+    goodness,
 )
 from imupipe.stats.allan import allan_curves
 from imupipe.vocab import CHI2_95
@@ -232,6 +233,7 @@ def test_delta_bic_is_the_dispersion_scaled_deviance_drop_minus_k_ln_n():
 def test_error_must_fall_for_an_avar_term():
     assert judge(_fit(80.0), _good(error=2.01))[1] is True
     assert judge(_fit(80.0), _good(error=2.0))[1] is False  # D/dof = 20/10 does not fall
+    assert judge(_fit(80.0), _good(error=2.4), fit_new=_fit(25.0))[1] is False  # 2.5 ≥ 2.4
 
 
 def test_error_rule_is_the_error_not_the_deviance_for_tolerance_zero():
@@ -245,6 +247,10 @@ def test_slow_correction_may_raise_the_deviance_by_up_to_the_tolerance():
     assert judge(old, _good(error=1.0), tolerance=2.0)[1] is True
     assert judge(old, _good(error=1.0), tolerance=1.999)[1] is False
     assert judge(_fit(12.0, dof=10), _good(error=1.0), tolerance=CHI2_95)[1] is False  # 6.7
+    # any positive tolerance replaces the error rule: (20 − 19.5)/1.95 ≤ 0.5 while D/dof rose
+    assert judge(_fit(19.5, dof=10), _good(error=1.0), tolerance=0.5)[1] is True
+    assert judge(_fit(30.0, dof=10), _good(error=1.0), tolerance=0.5)[1] is True  # fell: −10/3
+    assert judge(old, _good(error=1.0), tolerance=2.4, fit_new=_fit(21.0))[1] is False  # 2.5
 
 
 def test_max_abs_z_may_not_grow():
@@ -252,6 +258,8 @@ def test_max_abs_z_may_not_grow():
     assert judge(_fit(80.0), _good(max_abs_z=3.6, n_flags=1), z)[1] is True
     assert judge(_fit(80.0), _good(max_abs_z=3.5001, n_flags=1), z)[1] is True
     assert judge(_fit(80.0), _good(max_abs_z=3.2, n_flags=1), z)[1] is False
+    z_new = float(ieee952.deviance_residuals(_avar_with(z), MODEL, EDF)[5])
+    assert judge(_fit(80.0), _good(max_abs_z=z_new, n_flags=1), z)[1] is True  # equal: no growth
 
 
 def test_max_abs_z_up_to_three_is_allowed_even_when_it_grows():
@@ -261,11 +269,11 @@ def test_max_abs_z_up_to_three_is_allowed_even_when_it_grows():
 
 
 def test_flag_count_may_not_increase():
-    z = {4: 4.0, 7: -3.4}
+    z = {4: 4.5, 7: -3.4}
     assert judge(_fit(80.0), _good(max_abs_z=5.0, n_flags=2), z)[1] is True
     assert judge(_fit(80.0), _good(max_abs_z=5.0, n_flags=1), z)[1] is False
     # |z| = 2.9 is no flag
-    assert judge(_fit(80.0), _good(max_abs_z=5.0, n_flags=1), {4: 4.0, 7: 2.9})[1] is True
+    assert judge(_fit(80.0), _good(max_abs_z=5.0, n_flags=1), {4: 4.5, 7: 2.9})[1] is True
 
 
 def test_flags_outside_the_fitted_range_do_not_count():
@@ -273,6 +281,40 @@ def test_flags_outside_the_fitted_range_do_not_count():
     assert judge(_fit(80.0), _good(max_abs_z=1.0), z)[1] is True
     assert judge(_fit(80.0), _good(max_abs_z=1.0), {2: 9.0})[1] is False  # first fitted τ
     assert judge(_fit(80.0), _good(max_abs_z=1.0), {13: 9.0})[1] is False  # last fitted τ
+
+
+def test_goodness_counts_the_flags_of_the_fitted_range():
+    """z at every τ; max |z|, its τ, rms z and the |z| > 3 count over the fitted τ only."""
+    z = {0: 9.0, 3: 3.5, 6: -4.0, 8: 2.9, 10: -1.0, 15: -9.0}
+    avar = _avar_with(z)
+    good = goodness(_fit(20.0), TAU, avar, EDF)
+    expected = np.zeros(16)
+    for i, v in z.items():
+        expected[i] = v
+    np.testing.assert_allclose(good.z, expected, atol=1e-9)
+    assert good.n_flags == 2  # 3.5 and −4.0; 2.9 is no flag, 9 and −9 lie outside
+    assert good.max_abs_z == pytest.approx(4.0, abs=1e-9)
+    assert good.tau_max_abs_z == TAU[6]
+    rms = np.sqrt((3.5**2 + 4.0**2 + 2.9**2 + 1.0**2) / len(FITTED))
+    assert good.rms_z == pytest.approx(rms, rel=1e-9)
+    assert (good.error, good.deviance, good.dof) == (2.0, 20.0, 10)
+
+
+def test_goodness_p_value_is_the_bootstrap_share_at_or_above_the_deviance():
+    """p = (1 + #{D* ≥ D}) / (200 + 1): 1/201 for a deviance no bootstrap reaches, 1 for 0."""
+    avar = _avar_with({})
+    assert goodness(_fit(1e9), TAU, avar, EDF).p_value == 1 / 201
+    assert goodness(_fit(0.0), TAU, avar, EDF).p_value == 1.0
+
+
+@pytest.mark.parametrize(("quantile", "lo", "hi"), [(0.5, 0.35, 0.65), (0.9, 0.03, 0.2)])
+def test_goodness_p_value_of_a_typical_deviance(quantile, lo, hi):
+    """Bootstrap AVAR* = model · χ²_ν/ν (ν from 1000 down to 10 over τ) refitted with the two
+    columns: its deviance is ~χ² with 12 − 2 dof, so a deviance at that χ²'s quantile q has a
+    p-value near 1 − q (200 bootstrap draws: ±0.035 at 0.5)."""
+    edf = np.geomspace(1000.0, 10.0, 16)
+    fit = _fit(float(stats.chi2.ppf(quantile, len(FITTED) - 2)))
+    assert lo < goodness(fit, TAU, MODEL.copy(), edf).p_value < hi
 
 
 # --------------------------------------------------------------------------------------------
@@ -299,6 +341,31 @@ def test_holdout_holds_when_both_parities_improve():
     assert max(hold["power_ratio_heldout"]) < 0.2
 
 
+def test_holdout_power_ratio_is_the_heldout_residual_power_over_the_heldout_power():
+    """Ratio = ‖residual‖² / ‖series‖² on the held-out segments, each with the drift nuisance
+    (a linear rate ramp) projected out there; the coefficient fitted with the drift on the
+    training segments (least squares here, independently of effects.spectral_fit)."""
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 1.0)
+    x = np.sin(2 * np.pi * np.arange(N_D) / 200.0)
+    y = 0.3 * np.random.default_rng(5).standard_normal(N_D) + 0.5 * x + 1e-3 * np.arange(N_D)
+    yw, xw, u = whiten(y), whiten(x[:, None]), whiten.drift
+    n = len(yw)
+    even = (np.arange(n) * SEGMENTS // n) % 2 == 0
+
+    def off_drift(v, m):
+        return v[m] - u[m] * np.linalg.lstsq(u[m, None], v[m], rcond=None)[0][0]
+
+    expected = []
+    for train in (even, ~even):
+        coef = np.linalg.lstsq(np.column_stack([xw[train, 0], u[train]]), yw[train], rcond=None)
+        resid = off_drift(yw - xw[:, 0] * coef[0][0], ~train)
+        expected.append(resid @ resid / np.sum(off_drift(yw, ~train) ** 2))
+    cand = effects.Candidate("supply", {}, {}, regressors=x[:, None], names=("coefficient",))
+    hold = cand.holdout(whiten, y, SEGMENTS)
+    assert hold["power_ratio_heldout"] == pytest.approx(expected, rel=1e-9)
+    assert hold["holds"] is True
+
+
 @pytest.mark.parametrize("gains", [(1.0, 0.3), (0.3, 1.0)])
 def test_holdout_fails_when_only_one_parity_improves(gains):
     hold = _coupled(*gains)
@@ -318,6 +385,44 @@ def test_bias_step_has_no_holdout_split():
     whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 1.0)
     hold = cand.holdout(whiten, np.zeros(N_D), SEGMENTS)
     assert hold == {"holds": True, "note": "a step is local; no hold-out split"}
+
+
+def test_profile_interval_over_options_is_the_union_within_chi2():
+    """A one-coefficient effect searched over options (warm-up τw): the options within
+    χ²₁(0.95) = 3.8415 of the best Wald χ² each give β ± √(room · var); the interval is their
+    union, and τw's interval is where the room crosses 0 (interpolated in log τw, censored at
+    the grid's end)."""
+    fits = [
+        effects.SpectralFit(np.array([b]), np.array([[v]]), chi2, 1.0)
+        for b, v, chi2 in ((2.0, 0.25, 10.0), (2.5, 0.16, 9.0), (1.0, 0.01, 5.0))
+    ]
+    fixed = [{"warmup_tau_s": 10.0}, {"warmup_tau_s": 20.0}, {"warmup_tau_s": 40.0}]
+    out = effects._profile_interval(fits, fixed)
+    rooms = [3.841458820694124, 2.841458820694124]
+    lo = min(2.0 - np.sqrt(rooms[0] * 0.25), 2.5 - np.sqrt(rooms[1] * 0.16))
+    hi = max(2.0 + np.sqrt(rooms[0] * 0.25), 2.5 + np.sqrt(rooms[1] * 0.16))
+    assert out["_coefficient"] == pytest.approx([lo, hi], rel=1e-12)  # 1.0203, 3.1743
+    w = rooms[1] / (rooms[1] + 1.158541179305876)  # room at 40 s: 3.8415 − 5
+    assert out["warmup_tau_s"] == pytest.approx([10.0, 20.0 * 2.0**w], rel=1e-12)
+
+
+def test_options_searched_are_counted_in_the_evidence():
+    """Bonferroni factor (``n_options``) and parameter count (ΔBIC's k) of the time-domain
+    candidates: coupling 3 lags × {level, level + rate} = 6 options, k = 2 coefficients + the
+    choice; warm-up 24 τw, k = amplitude + τw; a step k = size + time."""
+    rng = np.random.default_rng(3)
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 1.0)
+    y = rng.standard_normal(N_D)
+    aux = np.cumsum(rng.standard_normal(N_D))
+    coupling = effects.coupling_candidate("temperature", y, aux, 1.0, "degC", whiten)
+    warmup = effects.warmup_candidate(y, 1.0, whiten)
+    step = effects.step_candidate(y, 1.0, whiten)
+    assert (coupling.n_options, coupling.n_params) == (6, 3)
+    assert (warmup.n_options, warmup.n_params) == (24, 2)
+    assert step.n_params == 2
+    for cand in (coupling, warmup, step):
+        assert cand.evidence["n_options"] == cand.n_options
+        assert 0 < cand.evidence["p_value_bonferroni"] == cand.p_value <= 1
 
 
 # --------------------------------------------------------------------------------------------
@@ -445,3 +550,5 @@ def test_candidates_not_significant_on_a_clean_axis_are_rejected_with_family_p()
         assert ev["n_time_domain_tests"] == 3
         assert ev["p_value_family"] == min(1.0, 3 * ev["p_value_bonferroni"])
         assert rec.reason.startswith(f"p {ev['p_value_family']:.3g} >= 0.001")
+    # a p-value times the options searched is capped at 1 (the step: ~3000 change points)
+    assert _candidate(res, "bias_step").evidence["p_value_bonferroni"] == 1.0
