@@ -374,6 +374,23 @@ def test_holdout_fails_when_only_one_parity_improves(gains):
     assert hold["holds"] is False
 
 
+def test_holdout_fails_when_one_parity_gets_slightly_worse():
+    hold = _coupled(1.0, 0.45)
+    ratios = sorted(hold["power_ratio_heldout"])
+    assert ratios[0] < 0.5 and 1.2 < ratios[1] < 1.5
+    assert hold["holds"] is False
+
+
+def test_coefficient_interval_and_p_value_of_a_spectral_fit():
+    """95 % interval β ± Φ⁻¹(0.975)·se = β ± 1.959964·se; p = P(χ²_k ≥ Wald χ²)."""
+    fit = effects.SpectralFit(np.array([2.0, -1.0]), np.diag([0.25, 4.0]), 5.991464547107979, 1.0)
+    assert fit.interval(0) == pytest.approx([2.0 - 0.979982, 2.0 + 0.979982], rel=1e-6)
+    assert fit.interval(1) == pytest.approx([-1.0 - 3.919928, -1.0 + 3.919928], rel=1e-6)
+    assert fit.p_value() == pytest.approx(0.05, rel=1e-12)  # χ²₂(0.95) = 5.9915
+    one = effects.SpectralFit(np.array([2.0]), np.array([[0.25]]), 3.841458820694124, 1.0)
+    assert one.p_value() == pytest.approx(0.05, rel=1e-12)
+
+
 def test_holdout_fails_when_the_coupling_changes_sign():
     hold = _coupled(1.0, -1.0)
     assert min(hold["power_ratio_heldout"]) > 2
