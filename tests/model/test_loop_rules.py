@@ -411,7 +411,7 @@ def test_profile_interval_over_options_is_the_union_within_chi2():
     the grid's end)."""
     fits = [
         effects.SpectralFit(np.array([b]), np.array([[v]]), chi2, 1.0)
-        for b, v, chi2 in ((2.0, 0.25, 10.0), (2.5, 0.16, 9.0), (1.0, 0.01, 5.0))
+        for b, v, chi2 in ((2.0, 0.25, 10.0), (2.5, 0.16, 9.0), (1.0, 0.01, 5.9))
     ]
     fixed = [{"warmup_tau_s": 10.0}, {"warmup_tau_s": 20.0}, {"warmup_tau_s": 40.0}]
     out = effects._profile_interval(fits, fixed)
@@ -419,7 +419,7 @@ def test_profile_interval_over_options_is_the_union_within_chi2():
     lo = min(2.0 - np.sqrt(rooms[0] * 0.25), 2.5 - np.sqrt(rooms[1] * 0.16))
     hi = max(2.0 + np.sqrt(rooms[0] * 0.25), 2.5 + np.sqrt(rooms[1] * 0.16))
     assert out["_coefficient"] == pytest.approx([lo, hi], rel=1e-12)  # 1.0203, 3.1743
-    w = rooms[1] / (rooms[1] + 1.158541179305876)  # room at 40 s: 3.8415 − 5
+    w = rooms[1] / (rooms[1] + 0.258541179305876)  # room at 40 s: 3.8415 − 4.1 (outside)
     assert out["warmup_tau_s"] == pytest.approx([10.0, 20.0 * 2.0**w], rel=1e-12)
 
 
@@ -437,6 +437,9 @@ def test_options_searched_are_counted_in_the_evidence():
     assert (coupling.n_options, coupling.n_params) == (6, 3)
     assert (warmup.n_options, warmup.n_params) == (24, 2)
     assert step.n_params == 2
+    # τw is profiled over its options (one column each); a coupling's lag has no interval
+    assert set(warmup.intervals) == {"warmup_amplitude", "warmup_tau_s"}
+    assert "lag_s" not in coupling.intervals
     for cand in (coupling, warmup, step):
         assert cand.evidence["n_options"] == cand.n_options
         assert 0 < cand.evidence["p_value_bonferroni"] == cand.p_value <= 1
