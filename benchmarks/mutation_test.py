@@ -88,6 +88,14 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/io/test_decode_contract.py",
         "tests/report/test_accel_scale_end_to_end.py",
     ),
+    # the rule tests first (fast; -x stops at the first failure); tests/model/test_loop_sim.py
+    # (six 3 h axes per scenario, minutes) is left out of the per-mutant run for time
+    "pipeline/model/loop.py": ("tests/model/test_loop_rules.py", "tests/model/test_loop.py"),
+    "pipeline/model/effects.py": (
+        "tests/model/test_loop_rules.py",
+        "tests/model/test_effects_full_rate.py",
+        "tests/model/test_loop.py",
+    ),
 }
 
 
