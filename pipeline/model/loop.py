@@ -307,6 +307,7 @@ class _Axis:
         self._spikes: effects.Candidate | None = None
         self._spikes_searched = sig.spike_free
         self._spike_avar: np.ndarray | None = None
+        self._halves: dict[bool, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
 
     def spike_candidate(self) -> effects.Candidate | None:
         """:func:`effects.spike_candidate` of the full-rate series, searched once per axis (a
@@ -344,7 +345,20 @@ class _Axis:
 
     def half_curves(self, state: _State) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """(tau, avar, edf) of each half of the (spike-corrected) full-rate series, one half at
-        a time (views of the series: the only new full-rate array is one half's phase)."""
+        a time (views of the series: the only new full-rate array is one half's phase).
+
+        Computed once per axis with and once without the spike correction (there is only one,
+        :meth:`spike_candidate`): every round's hold-out of every AVAR term reads the same
+        curves, and each is two full-rate Allan passes (24 h at 1 kHz: the loop's largest
+        cost)."""
+        key = state.spikes is not None
+        if key not in self._halves:
+            self._halves[key] = self._half_curves(state.spikes)
+        return self._halves[key]
+
+    def _half_curves(
+        self, spikes_whole: SparseCorrection | None
+    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         y = self.sig.y
         h = len(y) // 2
         m = np.round(self.tau / self.sig.tau0).astype(int)
@@ -352,7 +366,7 @@ class _Axis:
         out = []
         excluded = self.sig.excluded
         for start in (0, h):
-            spikes = state.spikes.within(start, start + h) if state.spikes else None
+            spikes = spikes_whole.within(start, start + h) if spikes_whole else None
             mask = None if excluded is None else excluded[start : start + h]
             (c,) = allan_curves(
                 y[start : start + h], self.sig.tau0, m, correction=spikes, excluded=mask
