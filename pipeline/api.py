@@ -20,12 +20,11 @@ from imupipe.analysis.analyze import analyze_options
 from imupipe.analysis.results import AnalysisResult
 from imupipe.errors import ImupipeError
 from imupipe.progress import StageProgress
-from imupipe.recording.recorder import RecordSummary, parse_duration, write_truth
-from imupipe.recording.recorder import record as _run_recorder
 from imupipe.report.staging import staged_output
 
 if TYPE_CHECKING:
     from imupipe.fleet.run import FleetResult
+    from imupipe.recording.recorder import RecordSummary
 
 
 def default_out_dir(path: str | Path) -> Path:
@@ -161,6 +160,8 @@ def record(
         ImupipeError: bad options or a device that does not answer as an ADIS16364.
     """
     from imupipe.device.adis16364 import config_for_rate
+    from imupipe.recording.recorder import parse_duration, write_truth
+    from imupipe.recording.recorder import record as _run_recorder
 
     seconds = parse_duration(str(duration))
     if truth is not None and Path(truth).is_dir():

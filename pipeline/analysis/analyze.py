@@ -20,6 +20,7 @@ from typing import Protocol
 
 import numpy as np
 import polars as pl
+from threadpoolctl import threadpool_limits
 
 from imupipe.analysis.condition import (
     ConditionedSeries,
@@ -48,6 +49,13 @@ MEMORY_BUDGET_BYTES = 2_000_000_000
 
 MIN_FRAMES = 16
 """Fewer frames than this cannot give even the shortest averaging times with any confidence."""
+
+BLAS_THREADS = 1
+"""BLAS threads while the axes are analysed.  The loop's products are small (the whitening
+matrix is at most 1024 x 1024) and many (~340 at 12 h / 100 Hz): OpenBLAS' threads cost far
+more than they share, most of all on a busy machine where they spin waiting for a core
+(measured: 300 products of a 1023 x 1023 matrix and a vector, 1.78 s of CPU with 2 threads on
+a loaded 2-core machine, 0.04 s with one; the same bits either way)."""
 
 
 @dataclass(frozen=True)
@@ -119,11 +127,10 @@ def axis_result(
     sensor = sensor_of(name)
     usable = None if excluded is None else ~excluded
     y, curve, outliers = excise_outliers(y, tau0_s, curve, excluded)
-    looped = (
-        close_loop(AxisSignals(name, sensor, y, tau0_s, temp_d, supply_d, excluded), curve)
-        if loop
-        else None
+    signals = AxisSignals(
+        name, sensor, y, tau0_s, temp_d, supply_d, excluded, spike_free=outliers is None
     )
+    looped = close_loop(signals, curve) if loop else None
     return AxisResult(
         name=name,
         sensor=sensor,
@@ -272,7 +279,8 @@ def analyze(
         if options.rrd:
             outputs.begin(source.signals(series.rows))
         try:
-            results, stuck = analyze_axes(source, series, options, progress)
+            with threadpool_limits(BLAS_THREADS, user_api="blas"):
+                results, stuck = analyze_axes(source, series, options, progress)
             if not results:
                 raise no_axis_error(about, [stuck_warning(a, w) for a, w in stuck.items()])
         except BaseException:

@@ -37,6 +37,7 @@ curves) touch the full series, and only when those candidates are already signif
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
@@ -83,6 +84,9 @@ class AxisSignals:
     temp_d: np.ndarray | None  # (n // block_size,) °C
     supply_d: np.ndarray | None  # (n // block_size,) V
     excluded: np.ndarray | None = None  # (n,) bool: masked samples (gap policy "mask")
+    spike_free: bool = False
+    """:func:`effects.spike_candidate` already found no spike in ``y`` (the caller's outlier
+    search on this very series): the loop does not search again."""
 
 
 @dataclass
@@ -300,6 +304,19 @@ class _Axis:
         valid = m_d <= (len(self.y_d) - 1) // 2
         self.dec_index = np.flatnonzero(dec)[valid]
         self.m_d = m_d[valid]
+        self._spikes: effects.Candidate | None = None
+        self._spikes_searched = sig.spike_free
+        self._spike_avar: np.ndarray | None = None
+        self._halves: dict[bool, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
+
+    def spike_candidate(self) -> effects.Candidate | None:
+        """:func:`effects.spike_candidate` of the full-rate series, searched once per axis (a
+        full-rate pass; the series does not change between rounds): a fresh copy each call, as
+        each round annotates its own candidate."""
+        if not self._spikes_searched:
+            self._spikes = effects.spike_candidate(self.sig.y, self.sig.tau0)
+            self._spikes_searched = True
+        return copy.deepcopy(self._spikes)
 
     def avar_hi(self, avar: np.ndarray) -> np.ndarray:
         """95 % upper confidence bound (:func:`ieee952.avar_upper`) that a model of a
@@ -311,9 +328,12 @@ class _Axis:
     def corrected_avar(self, state: _State, cand: effects.Candidate) -> np.ndarray:
         """AVAR after a correction: full-rate recompute for spikes, else the decimated change
         AVAR_d(y_d − g) − AVAR_d(y_d) added on τ ≥ block (slow corrections do not act below)."""
-        if cand.spikes is not None:
-            m = np.round(self.tau / self.sig.tau0).astype(int)
-            return oadev(self.sig.y, self.sig.tau0, m, cand.spikes, self.sig.excluded)[0] ** 2
+        if cand.spikes is not None:  # always the one spike_candidate: computed once
+            if self._spike_avar is None:
+                m = np.round(self.tau / self.sig.tau0).astype(int)
+                y, tau0, excluded = self.sig.y, self.sig.tau0, self.sig.excluded
+                self._spike_avar = oadev(y, tau0, m, cand.spikes, excluded)[0] ** 2
+            return self._spike_avar.copy()
         if state.avar_d is None:
             state.avar_d = oadev(state.y_d, self.dt, self.m_d)[0] ** 2
         avar_d = oadev(state.y_d - cand.correction, self.dt, self.m_d)[0] ** 2
@@ -325,7 +345,20 @@ class _Axis:
 
     def half_curves(self, state: _State) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """(tau, avar, edf) of each half of the (spike-corrected) full-rate series, one half at
-        a time (views of the series: the only new full-rate array is one half's phase)."""
+        a time (views of the series: the only new full-rate array is one half's phase).
+
+        Computed once per axis with and once without the spike correction (there is only one,
+        :meth:`spike_candidate`): every round's hold-out of every AVAR term reads the same
+        curves, and each is two full-rate Allan passes (24 h at 1 kHz: the loop's largest
+        cost)."""
+        key = state.spikes is not None
+        if key not in self._halves:
+            self._halves[key] = self._half_curves(state.spikes)
+        return self._halves[key]
+
+    def _half_curves(
+        self, spikes_whole: SparseCorrection | None
+    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         y = self.sig.y
         h = len(y) // 2
         m = np.round(self.tau / self.sig.tau0).astype(int)
@@ -333,7 +366,7 @@ class _Axis:
         out = []
         excluded = self.sig.excluded
         for start in (0, h):
-            spikes = state.spikes.within(start, start + h) if state.spikes else None
+            spikes = spikes_whole.within(start, start + h) if spikes_whole else None
             mask = None if excluded is None else excluded[start : start + h]
             (c,) = allan_curves(
                 y[start : start + h], self.sig.tau0, m, correction=spikes, excluded=mask
@@ -514,7 +547,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         effects.step_candidate(state.y_d, dt, whiten),
         effects.warmup_candidate(state.y_d, dt, whiten),
         # spikes: one candidate, from the raw series' robust statistics (found once, whole)
-        effects.spike_candidate(ax.sig.y, ax.sig.tau0) if state.spikes is None else None,
+        ax.spike_candidate() if state.spikes is None else None,
     ]
     tried = [c for c in time_domain if c is not None]
     n_tests = sum(c.spikes is None for c in tried)  # spikes: their own family-wise test

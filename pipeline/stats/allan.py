@@ -5,10 +5,11 @@ The estimator is NIST SP 1065 eq. (11) on phase x (N = n + 1 points, x_0 = 0):
     sigma**2(m tau0) = sum_{i=0}^{N-2m-1} (x_{i+2m} - 2 x_{i+m} + x_i)**2 / (2 (m tau0)**2 (N - 2m))
 
 with x = tau0 * cumsum(y - mean(y)) in float64 (removing the mean first keeps x a zero-drift
-random walk, so the second differences do not lose digits to a large linear ramp).  The sum
-for each (m, axis) is one fused, vectorised pass compiled by numba and spread over the cores:
-numpy would need three passes that write memory per m (measured 3-4x slower), and the phase is
-the only large allocation (bounded by :data:`PHASE_BUDGET_BYTES`).
+random walk, so the second differences do not lose digits to a large linear ramp).  The sums
+of all m are one fused, vectorised pass per block of samples compiled by numba and spread over
+the cores (:func:`_sum_sq_second_diff`): numpy would need three passes that write memory per m
+(measured 3-4x slower), and the phase is the only large allocation (bounded by
+:data:`PHASE_BUDGET_BYTES`).
 Intervals: :mod:`imupipe.stats.edf`.
 
 Gaps: with a boolean ``excluded`` mask (missing frames, NaN or saturated rows, excised events),
@@ -206,6 +207,11 @@ def _integrate_excluding(
         x[i + 1] = acc * tau0
 
 
+SUM_BLOCK = 1 << 15
+"""Samples per block of :func:`_sum_sq_second_diff`: every factor's terms of one block are summed
+while the block's phase (256 KB; three such windows for a long lag) stays in the core's cache."""
+
+
 @numba.njit(parallel=True, fastmath=True, cache=True, nogil=True)
 def _sum_sq_second_diff_runs(
     x: np.ndarray, m: np.ndarray, runs: np.ndarray
@@ -220,8 +226,11 @@ def _sum_sq_second_diff_runs(
         row = x[a]
         acc = 0.0
         for r in range(runs.shape[0]):
-            for i in range(runs[r, 0], runs[r, 1] - 2 * lag + 1):
-                d = row[i + 2 * lag] - 2.0 * row[i + lag] + row[i]
+            start = runs[r, 0]
+            # slices: indices from 0, which numba knows are not negative, so the sum vectorises
+            far, mid, near = row[start + 2 * lag :], row[start + lag :], row[start:]
+            for i in range(runs[r, 1] - 2 * lag + 1 - start):
+                d = far[i] - 2.0 * mid[i] + near[i]
                 acc += d * d
         out[j, a] = acc
     return out
@@ -231,21 +240,39 @@ def _sum_sq_second_diff_runs(
 def _sum_sq_second_diff(x: np.ndarray, m: np.ndarray) -> np.ndarray:  # pragma: no cover (JIT)
     """sum_i (x[a, i+2m] - 2 x[a, i+m] + x[a, i])**2 over the N - 2m terms, for every m and axis.
 
-    ``x`` is (k, N) phase, one contiguous row per axis; returns (len(m), k).  One fused pass per
-    (m, axis) pair, pairs spread over the cores; ``fastmath`` lets the compiler vectorise the
-    sum by reassociating it (changes the result only by rounding, ~1e-15 relative).
+    ``x`` is (k, N) phase, one contiguous row per axis; returns (len(m), k).  Blocked over i:
+    each job sums the terms i of one block of :data:`SUM_BLOCK` samples for every m (the
+    block's phase is read from the cache, not from memory, once per m), jobs spread over the
+    cores; the block sums are then added up in one thread, so the result does not depend on
+    the number of threads.  The inner loop runs over slices (indices from 0, which numba knows are
+    not negative) and ``fastmath`` lets the compiler vectorise it by reassociating the sum:
+    the result changes only by rounding (~1e-14 relative), the per-block sums keep it at least
+    as accurate as one running sum.  12 h at 100 Hz, 61 factors, one axis: 0.08 s of CPU
+    against 0.50 s for one unblocked scalar pass per m.
     """
     k, size = x.shape
-    out = np.empty((m.size, k))
-    for job in numba.prange(m.size * k):
-        j, a = job // k, job % k
-        lag = m[j]
+    blocks = (size + SUM_BLOCK - 1) // SUM_BLOCK
+    part = np.zeros((k, blocks, m.size))
+    for job in numba.prange(k * blocks):
+        a, b = job // blocks, job % blocks
         row = x[a]
-        acc = 0.0
-        for i in range(size - 2 * lag):
-            d = row[i + 2 * lag] - 2.0 * row[i + lag] + row[i]
-            acc += d * d
-        out[j, a] = acc
+        start = b * SUM_BLOCK
+        for j in range(m.size):
+            lag = m[j]
+            count = min(start + SUM_BLOCK, size - 2 * lag) - start
+            far, mid, near = row[start + 2 * lag :], row[start + lag :], row[start:]
+            acc = 0.0
+            for i in range(count):
+                d = far[i] - 2.0 * mid[i] + near[i]
+                acc += d * d
+            part[a, b, j] = acc
+    out = np.empty((m.size, k))
+    for a in range(k):
+        for j in range(m.size):
+            acc = 0.0
+            for b in range(blocks):
+                acc += part[a, b, j]
+            out[j, a] = acc
     return out
 
 

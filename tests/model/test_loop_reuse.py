@@ -1,0 +1,61 @@
+"""The loop does its full-rate work once per axis, whatever the number of rounds: the spike
+search (none when the caller's outlier search already found nothing) and the hold-out curves
+of the two halves.  A round that searched again would cost a full-rate pass each time (24 h at
+1 kHz: tens of seconds per axis) and must give the same model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imupipe.model import effects, loop
+from imupipe.model.loop import AxisSignals, close_loop
+from imupipe.stats.allan import allan_curves
+
+TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
+WHITE = 8.7e-4 / np.sqrt(TAU0)  # rad/s per sample: N = 0.05 deg/sqrt(h), the paper's gyro
+
+
+@pytest.fixture(scope="module")
+def sinusoid_axis() -> tuple[np.ndarray, object]:
+    """White noise plus a 0.02 Hz, 3 mrad/s sinusoid (the loop accepts it in round 1 and
+    searches again in round 2), and its Allan curve."""
+    rng = np.random.default_rng(11)
+    t = np.arange(N) * TAU0
+    y = WHITE * rng.standard_normal(N) + 3e-3 * np.sin(2 * np.pi * 0.02 * t + 0.3)
+    return y, allan_curves(y, TAU0)[0]
+
+
+def counting(monkeypatch, owner, name) -> list[int]:
+    calls = [0]
+    original = getattr(owner, name)
+
+    def wrapped(*args, **kwargs):
+        calls[0] += 1
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(owner, name, wrapped)
+    return calls
+
+
+def test_spike_search_and_half_curves_run_once_over_several_rounds(monkeypatch, sinusoid_axis):
+    y, curve = sinusoid_axis
+    searches = counting(monkeypatch, effects, "spike_candidate")
+    halves = counting(monkeypatch, loop._Axis, "_half_curves")
+    res = close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), curve)
+    assert [e.kind for e in res.accepted][:1] == ["sinusoid"]  # so a second round ran
+    assert searches[0] == 1
+    assert halves[0] == 1  # no spikes: the halves without a correction (one hold-out here)
+
+
+def test_spike_free_series_is_not_searched_again_and_gives_the_same_model(
+    monkeypatch, sinusoid_axis
+):
+    y, curve = sinusoid_axis
+    searched = close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), curve)
+    searches = counting(monkeypatch, effects, "spike_candidate")
+    trusted = close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None, spike_free=True), curve)
+    assert searches[0] == 0
+    assert trusted.terms_after.random_walk.value == searched.terms_after.random_walk.value
+    assert [e.kind for e in trusted.accepted] == [e.kind for e in searched.accepted]
+    assert [c.kind for c in trusted.rejected] == [c.kind for c in searched.rejected]
