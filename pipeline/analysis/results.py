@@ -19,6 +19,7 @@ from imupipe import __version__
 from imupipe.vocab import AXES
 
 if TYPE_CHECKING:
+    from imupipe.analysis.events import EventsFound
     from imupipe.model.ieee952 import NoiseTerms
     from imupipe.model.loop import LoopResult
     from imupipe.stats.allan import AllanCurve
@@ -79,6 +80,8 @@ class AnalysisResult:
     input: InputSummary
     axes: dict[str, AxisResult]
     device: dict[str, str] = field(default_factory=dict)
+    events: EventsFound | None = None
+    """Disturbance events found jointly on all axes (None: the search did not run)."""
 
     def by_sensor(self, sensor: str) -> list[AxisResult]:
         """The axes of one sensor ("gyro" or "accel") in report order."""
@@ -189,6 +192,7 @@ def report_json(result: AnalysisResult) -> dict:
             "device": dict(result.device),
             "axes": {name: _axis_json(axis) for name, axis in result.axes.items()},
         }
+        | ({} if result.events is None else {"events": result.events.as_dict()})
     )
 
 
