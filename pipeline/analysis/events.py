@@ -127,11 +127,12 @@ class DisturbanceEvent:
     units: dict[str, str] = field(default_factory=dict)
 
     def as_dict(self, tau0: float, t0_stamp_s: float) -> dict:
-        """report.json record (``t0_stamp_s``: the stamp of the record's first sample)."""
+        """report.json record (``t0_stamp_s``: the time of the analysed record's first sample
+        on the recording's time base, s since its first frame)."""
         out = {
             "kind": self.kind,
             "start_s": self.start_s,
-            "start_stamp_s": t0_stamp_s + self.start_s,
+            "start_recording_s": t0_stamp_s + self.start_s,
             "duration_s": self.duration_s,
             "axes": list(self.axes),
             "size": {a: {"value": v, "unit": self.units.get(a, "")} for a, v in self.size.items()},
@@ -405,7 +406,8 @@ def event_mask(events: list[DisturbanceEvent], n: int) -> np.ndarray | None:
 @dataclass(frozen=True)
 class EventsFound:
     """The detector's result on one record (report.json ``events``): ``tau0_s`` the sampling
-    interval and ``t0_stamp_s`` the stamp (s) of the analysed record's first sample."""
+    interval and ``t0_stamp_s`` the time of the analysed record's first sample on the
+    recording's time base (s since its first frame; not 0 when a later segment is analysed)."""
 
     detector: EventDetector
     events: tuple[DisturbanceEvent, ...]
