@@ -216,11 +216,13 @@ def _robust_scale(r: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class _Scale:
-    """z-scores of one scale: windows ``[starts, starts + length)`` (fine blocks), (J, A)."""
+    """z-scores of one scale: windows ``[starts, starts + length)`` (fine blocks), (J, A), and
+    the residual scale of each axis (its unit)."""
 
     length: int
     starts: np.ndarray
     z: np.ndarray
+    sigma: np.ndarray
 
     @property
     def dof(self) -> float:
@@ -246,7 +248,7 @@ def _scales(x: np.ndarray, dt: float) -> list[_Scale]:
         scale = np.array([_robust_scale(r[:, a]) for a in range(r.shape[1])])
         with np.errstate(divide="ignore", invalid="ignore"):
             z = np.where(scale > 0, r / scale, 0.0)
-        out.append(_Scale(length, starts[inner], z))
+        out.append(_Scale(length, starts[inner], z, scale))
         length *= 2
     return out
 
