@@ -47,6 +47,7 @@ EFFECT_KINDS = (
     "ramp",
     "warmup",
     "event",
+    "tilt",
     "outliers",
 )
 """Undeclared effects.  A supply-voltage coupling is not generated: a sensor_msgs/Imu bag
@@ -227,16 +228,36 @@ def add_effect(
         y[:, a] += coef * (temp - temp.mean())
         out |= {"coefficient_per_degC": coef}
     elif kind == "event":
-        axes = sorted({a, *rng.choice(6, int(rng.integers(1, 4)), replace=False).tolist()})
-        at, length = rng.uniform(0.1, 0.9) * duration, rng.uniform(5, 400)
+        # a bump of the table: 2-4 axes at once, 1-60 s, a box with cosine-tapered edges
+        others = rng.choice([b for b in range(6) if b != a], int(rng.integers(1, 4)), replace=False)
+        axes = sorted({a, *others.tolist()})
+        at, length = rng.uniform(0.1, 0.9) * duration, rng.uniform(1, 60)
         inside = (t >= at) & (t < at + length)
+        shape = signal.windows.tukey(int(inside.sum()), 0.2)
         sizes = {}
         for b in axes:
             s = size * truth_noise[AXES[b]].adev(length) * rng.choice([-1, 1]) * 3
-            y[inside, b] += s
+            y[inside, b] += s * shape
             sizes[AXES[b]] = float(s)
         out |= {"axis": AXES[a], "axes": [AXES[b] for b in axes], "time_s": at,
                 "duration_s": length, "sizes": sizes}  # fmt: skip
+    elif kind == "tilt":
+        # a tilt episode: the unit leans by theta about a random horizontal axis for 360 s and
+        # comes back (1 s each way): gravity shifts accel x/y by g sin(theta) (cos/sin of the
+        # azimuth) and accel z by g (cos(theta) - 1); the gyros see the 1 s rotations
+        at, length, phi = rng.uniform(0.1, 0.8) * duration, 360.0, rng.uniform(0, 2 * np.pi)
+        worst = max(truth_noise[AXES[b]].adev(length) for b in (3, 4))
+        theta = float(np.arcsin(min(1.0, size * 3 * worst / 9.80665)))
+        lean = np.clip((t - at) / 1.0, 0, 1) - np.clip((t - at - length) / 1.0, 0, 1)
+        rate = (np.diff(lean, prepend=0.0) / tau0) * theta
+        y[:, 3] += 9.80665 * np.sin(theta * lean) * np.cos(phi)
+        y[:, 4] += 9.80665 * np.sin(theta * lean) * np.sin(phi)
+        y[:, 5] += 9.80665 * (np.cos(theta * lean) - 1)
+        y[:, 0] += rate * np.sin(phi)
+        y[:, 1] -= rate * np.cos(phi)
+        out |= {"axis": "accel_x" if abs(np.cos(phi)) >= abs(np.sin(phi)) else "accel_y",
+                "axes": ["accel_x", "accel_y"], "time_s": at, "duration_s": length,
+                "theta_rad": theta, "azimuth_rad": phi}  # fmt: skip
     elif kind == "outliers":
         count = int(rng.integers(30, 200))
         where = rng.choice(n, count, replace=False)

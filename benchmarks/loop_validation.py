@@ -11,7 +11,8 @@ scored against the generator's truth:
 * false: an accepted effect or excised outliers on an axis without an effect (clean recordings:
   on any axis; a resolved R term is listed under "found as" but not counted);
 * error before/after: the Allan-space error (gamma deviance / dof, ``report.json`` model
-  ``error_before``/``error_after``) on the effect's axis;
+  ``error_before``/``error_after``) on the effect's axis, and the time-domain error (whitened
+  residual, ``time_domain_error_before``/``after``) beside it;
 * N and B after the loop against the truth on every analysed axis.
 
 This is a measurement, not a test (not run in CI).  A small panel runs in minutes on 2 cores::
@@ -46,16 +47,19 @@ EXPECTED = {
     "bias_step": {"bias_step"},
     "ramp": {"rate_ramp", "R term"},
     "warmup": {"rate_ramp"},
-    "event": {"event"},  # joint multi-axis events are not built yet (issue 13 item 1)
+    "event": {"event"},  # a disturbance event found jointly on the axes (report.json events)
+    "tilt": {"event"},
     "outliers": {"outliers", "spike"},
 }
 """Loop kinds that count as the right answer for each generated effect."""
 
 
-def _found(axis: dict) -> list[str]:
-    """Accepted effects, "outliers" if any were excised, "R term" if the IEEE 952 rate ramp is
+def _found(axis: dict, name: str, events: list[dict]) -> list[str]:
+    """Accepted effects, "event" for each disturbance event touching the axis (report.json
+    ``events.found``), "outliers" if any were excised, "R term" if the IEEE 952 rate ramp is
     resolved after the loop (a linear drift is that term)."""
     kinds = [e["kind"] for e in axis.get("effects", [])]
+    kinds += ["event" for e in events if name in e["axes"]]
     terms = axis.get("ieee952_after") or axis["ieee952"]
     resolved_r = terms.get("rate_ramp", {}).get("value") is not None
     return kinds + (["outliers"] if axis.get("outliers") else []) + (["R term"] * resolved_r)
@@ -84,7 +88,8 @@ def run_one(job: dict) -> dict:
         shutil.rmtree(work, ignore_errors=True)
     effect = truth.effect
     effect_axes = set(effect.get("axes", [effect["axis"]])) if effect else set()
-    found = {a: _found(ax) for a, ax in result["axes"].items()}
+    events = result.get("events", {}).get("found", [])
+    found = {a: _found(ax, a, events) for a, ax in result["axes"].items()}
     row: dict = {**job, "truth": truth.as_json(), "found": found}
     row["false_axes"] = sorted(
         a for a, k in found.items() if set(k) - {"R term"} and a not in effect_axes
@@ -96,6 +101,10 @@ def run_one(job: dict) -> dict:
         model = result["axes"].get(effect["axis"], {}).get("model", {})
         row["error_before"] = model.get("error_before")
         row["error_after"] = model.get("error_after")
+        row["time_error_before"] = model.get("time_domain_error_before")
+        row["time_error_after"] = model.get("time_domain_error_after")
+        row["p_after"] = model.get("p_value_after")
+    row["events"] = events
     n_err, b_err = {}, {}
     for a, ax in result["axes"].items():
         n_hat, b_hat = _terms(ax)
@@ -164,6 +173,10 @@ def table(rows: list[dict]) -> str:
             before = [r["error_before"] for r in rs if r["error_before"] is not None]
             after = [r["error_after"] for r in rs if r["error_after"] is not None]
             err = f"{np.median(before):.2f} → {np.median(after):.2f}" if before else "-"
+            tb = [r["time_error_before"] for r in rs if r.get("time_error_before") is not None]
+            ta = [r["time_error_after"] for r in rs if r.get("time_error_after") is not None]
+            if tb:
+                err += f" (time: {np.median(tb):.2f} → {np.median(ta):.2f})"
             found_as = ", ".join(
                 sorted({k for r in rs for k in r["found"].get(r["truth"]["effect"]["axis"], [])})
             )

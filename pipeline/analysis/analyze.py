@@ -30,6 +30,7 @@ from imupipe.analysis.condition import (
     stuck_warning,
     unanalysable,
 )
+from imupipe.analysis.events import EventsFound, detect, event_mask, fill_excised, fine_means
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.errors import ImupipeError, TooFewFramesError
 from imupipe.io.columns import HOUSEKEEPING, ColumnSource, open_columns
@@ -72,6 +73,8 @@ class AnalyzeOptions:
     tmp_dir: Path | None = None
     datasheet: Path | None = None  # TOML of the part's noise specs (imupipe.report.datasheet)
     temperature_topic: str | None = None
+    events: bool = True
+    """Find disturbance events jointly on all axes and excise them (imupipe.analysis.events)."""
 
 
 def analyze_options(**options: object) -> AnalyzeOptions:
@@ -209,40 +212,72 @@ def input_summary(
     )
 
 
+def find_axis_events(
+    source: ColumnSource, series: ConditionedSeries, t0_stamp_s: float
+) -> tuple[EventsFound | None, dict[str, str]]:
+    """First pass over the axes: the disturbance events found jointly on every analysable
+    axis (:mod:`imupipe.analysis.events`; None with fewer than one such axis), and the axes
+    found stuck."""
+    means: dict[str, np.ndarray] = {}
+    stuck: dict[str, str] = {}
+    for name in AXES:
+        y = source.column(name, series.rows)
+        assert y is not None  # axes are never null
+        why = unanalysable(y)
+        if why is not None:
+            stuck[name] = why
+        else:
+            means[name] = fine_means(series.on_grid(y), series.tau0_s)
+        del y
+    if not means:
+        return None, stuck
+    units = {a: "rad/s" if sensor_of(a) == "gyro" else "m/s^2" for a in means}
+    return detect(means, series.tau0_s, series.samples, units, t0_stamp_s), stuck
+
+
 def analyze_axes(
     source: ColumnSource,
     series: ConditionedSeries,
     options: AnalyzeOptions,
     progress: StageProgress,
-) -> tuple[dict[str, AxisResult], dict[str, str]]:
+    t0_stamp_s: float = 0.0,
+) -> tuple[dict[str, AxisResult], dict[str, str], EventsFound | None]:
     """Stages 3–4 (+ loop) on the chosen segment (or, policy ``"mask"``, the whole recording
-    on its sample grid), one axis at a time; returns the results of the analysed axes and the
-    axes found stuck (constant: nothing to analyse)."""
+    on its sample grid), one axis at a time; returns the results of the analysed axes, the
+    axes found stuck (constant: nothing to analyse) and the disturbance events (option
+    ``events``: found jointly on all axes first, their intervals excluded on every axis and
+    filled for the time-domain steps, :func:`imupipe.analysis.events.fill_excised`)."""
     rows, tau0 = series.rows, series.tau0_s
     aux: dict[str, np.ndarray | None] = {}
     for name in HOUSEKEEPING:
         x = source.column(name, rows)
         aux[name] = aux_block_means(None if x is None else series.on_grid(x), tau0)
     m = tau_factors(series.samples, per_decade=options.taus_per_decade)
+    found, stuck = find_axis_events(source, series, t0_stamp_s) if options.events else (None, {})
+    excluded = series.excluded
+    cut = None if found is None else event_mask(list(found.events), series.samples)
+    if cut is not None:
+        excluded = cut if excluded is None else excluded | cut
     results: dict[str, AxisResult] = {}
-    stuck: dict[str, str] = {}
     with progress.stage("analyse", len(AXES), "axes") as advance:
         for i, name in enumerate(AXES):
             y = source.column(name, rows)
             assert y is not None  # axes are never null
-            why = unanalysable(y)
+            why = stuck.get(name) or (None if found is not None else unanalysable(y))
             if why is not None:
                 stuck[name] = why
             else:
                 y = series.on_grid(y)
-                curve = allan_curves([y], tau0, m, excluded=series.excluded)[0]
+                if found is not None:
+                    y = fill_excised(y, found)
+                curve = allan_curves([y], tau0, m, excluded=excluded)[0]
                 results[name] = axis_result(
                     name, y, curve, tau0, aux["temp_c"], aux["supply_v"], options.loop,
-                    series.excluded,
+                    excluded,
                 )  # fmt: skip
             del y  # the spilled source's axis leaves before the next one comes
             advance(i + 1)
-    return results, stuck
+    return results, stuck, found
 
 
 def analyze(
@@ -274,13 +309,14 @@ def analyze(
         rec = source.conditioning()
         series = condition(rec, gaps=options.gaps)
         check_frames(rec, series.usable_samples)
+        t0_stamp_s = float(rec.frames["t_s"][series.rows.start])  # the first analysed sample
         about = replace(rec, frames=rec.frames.clear())
         del rec  # the spilled source's conditioning columns (t_s: 691 MB at 24 h / 1 kHz)
         if options.rrd:
             outputs.begin(source.signals(series.rows))
         try:
             with threadpool_limits(BLAS_THREADS, user_api="blas"):
-                results, stuck = analyze_axes(source, series, options, progress)
+                results, stuck, found = analyze_axes(source, series, options, progress, t0_stamp_s)
             if not results:
                 raise no_axis_error(about, [stuck_warning(a, w) for a, w in stuck.items()])
         except BaseException:
@@ -290,10 +326,14 @@ def analyze(
             *series.warnings,
             *(stuck_warning(a, why) for a, why in stuck.items()),
             *outlier_warnings(results),
+            *(found.warnings() if found is not None else []),
             *source.notes(series.segment.frames, options.rrd),
         ]
     result = AnalysisResult(
-        input=input_summary(about, series, warnings, label), axes=results, device=about.device
+        input=input_summary(about, series, warnings, label),
+        axes=results,
+        device=about.device,
+        events=found,
     )
     outputs.finish(result, progress)
     return result

@@ -19,6 +19,7 @@ from imupipe import __version__
 from imupipe.vocab import AXES
 
 if TYPE_CHECKING:
+    from imupipe.analysis.events import EventsFound
     from imupipe.model.ieee952 import NoiseTerms
     from imupipe.model.loop import LoopResult
     from imupipe.stats.allan import AllanCurve
@@ -79,6 +80,8 @@ class AnalysisResult:
     input: InputSummary
     axes: dict[str, AxisResult]
     device: dict[str, str] = field(default_factory=dict)
+    events: EventsFound | None = None
+    """Disturbance events found jointly on all axes (None: the search did not run)."""
 
     def by_sensor(self, sensor: str) -> list[AxisResult]:
         """The axes of one sensor ("gyro" or "accel") in report order."""
@@ -97,6 +100,13 @@ class AnalysisResult:
 SCHEMA_VERSION = 1
 ERROR_MEASURE = "gamma deviance per degree of freedom of the Allan-variance model fit"
 """What ``error_before``/``error_after`` are (issue 4; lower is better)."""
+TIME_ERROR_MEASURE = (
+    "mean square of the whitened residual: first differences of the coarse block means "
+    "(<= 1024 blocks, tau >= T/1024) as standardised one-step prediction errors under the "
+    "fitted model's rate PSD, linear ramp projected out; about 1 when the model describes the "
+    "series in the time domain, above 1 when something is missing"
+)
+"""What ``model.time_domain_error_before``/``after`` are (issue 13 item 7)."""
 
 ALLAN_SCHEMA = pl.Schema(
     {
@@ -185,10 +195,12 @@ def report_json(result: AnalysisResult) -> dict:
             "schema_version": SCHEMA_VERSION,
             "generator": {"name": "imupipe", "version": __version__},
             "error_measure": ERROR_MEASURE,
+            "time_domain_error_measure": TIME_ERROR_MEASURE,
             "input": asdict(result.input),
             "device": dict(result.device),
             "axes": {name: _axis_json(axis) for name, axis in result.axes.items()},
         }
+        | ({} if result.events is None else {"events": result.events.as_dict()})
     )
 
 

@@ -146,6 +146,10 @@ class LoopResult:
     after: Goodness
     accepted: list[AcceptedEffect] = field(default_factory=list)
     rejected: list[RejectedCandidate] = field(default_factory=list)
+    time_error_before: float = float("nan")
+    time_error_after: float = float("nan")
+    """:func:`time_domain_error` of the baseline on the series and of the final model on the
+    corrected series."""
 
     @property
     def z_before(self) -> np.ndarray:
@@ -176,6 +180,8 @@ class LoopResult:
             "max_abs_z_after": self.after.max_abs_z,
             "tau_max_abs_z_before": self.before.tau_max_abs_z,
             "tau_max_abs_z_after": self.after.tau_max_abs_z,
+            "time_domain_error_before": self.time_error_before,
+            "time_domain_error_after": self.time_error_after,
         }
 
 
@@ -465,6 +471,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         accepted.append(chosen.accepted(good.error, new_good.error))
         fit, good = new_fit, new_good
     terms1 = terms0 if fit is fit0 else state.terms(ax)
+    time_before = time_domain_error(fit0, {}, ax.y_d, ax.dt)
     return LoopResult(
         name=signals.name,
         tau_s=tau,
@@ -478,7 +485,30 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         after=good,
         accepted=accepted,
         rejected=list(rejected.values()),
+        time_error_before=time_before,
+        time_error_after=(
+            time_before
+            if fit is fit0
+            else time_domain_error(fit, state.column_params, state.y_d, ax.dt)
+        ),
     )
+
+
+def time_domain_error(
+    fit: ieee952.CompositeFit, column_params: dict[str, float], y_d: np.ndarray, dt: float
+) -> float:
+    """The time-domain error of a fitted model on the block means ``y_d`` (block ``dt`` s):
+    the mean square of the whitened residual — the first differences of the coarse block means
+    (:class:`effects.Whitener`, ≤ 1024 blocks) turned into standardised one-step prediction
+    errors under the model's rate PSD (:func:`noise_psd`), the linear-ramp nuisance projected
+    out — Σ e² / (m − 1).  ≈ 1 (χ²_{m−1}/(m − 1)) when the model describes the series at
+    τ ≥ the coarse block; above 1 when the series holds what the model lacks.  It sees only
+    the slow part (τ ≥ T/1024) and no AVAR-only term (a sinusoid stays in the series)."""
+    whiten = effects.Whitener(noise_psd(fit, column_params), len(y_d), dt)
+    yw = whiten(y_d)
+    u = whiten.drift
+    r = yw - u * float(u @ yw) / float(u @ u)
+    return float(r @ r) / max(len(r) - 1, 1)
 
 
 def _judge(

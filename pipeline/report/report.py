@@ -263,6 +263,7 @@ def report_markdown(
             f"D/dof {_fmt(fit['deviance_per_dof'])}" + (f"; {fit['note']}" if fit["note"] else "")
         )
     md.append("")
+    md += _events_section(result)
     loop_rows = _loop_rows(result)
     if loop_rows:
         md += ["## Closed loop: model error before and after", "", f"Error: {ERROR_MEASURE}.", ""]
@@ -272,6 +273,42 @@ def report_markdown(
     md += [f"![{name}]({path.name})" for name, path in figures.items()] + [""]
     md += ["## Kalibr `imu.yaml`", "", *_fence(kalibr_yaml(result).rstrip(), "yaml"), ""]
     return "\n".join(md)
+
+
+def _events_section(result: AnalysisResult) -> list[str]:
+    """``## Disturbance events``: what the joint search tested and one row per event found."""
+    if result.events is None:
+        return []
+    doc = result.events.as_dict()
+    det = doc["detector"]
+    md = [
+        "## Disturbance events (found jointly on all axes)",
+        "",
+        f"{det['tests']} windows of {len(det['scales'])} lengths "
+        f"({_fmt(det['scales'][0]['window_s']) if det['scales'] else '-'}–"
+        f"{_fmt(det['scales'][-1]['window_s']) if det['scales'] else '-'} s) tested on "
+        f"{', '.join(det['axes'])}; record-wide false-alarm probability {det['false_alarm']:g}. "
+        "Transients are excised on every axis (the Allan variance skips every term touching "
+        "them); steps are kept and left to the loop.",
+        "",
+    ]
+    if not doc["found"]:
+        return [*md, "None found.", ""]
+    rows = [
+        (
+            e["kind"],
+            f"{e['start_s']:.1f}",
+            f"{e['duration_s']:.1f}",
+            ", ".join(
+                f"{a} {_fmt(e['size'][a]['value'])} {e['size'][a]['unit']} (z {e['z'][a]:.1f})"
+                for a in e["axes"]
+            ),
+            e["handling"],
+        )
+        for e in doc["found"]
+    ]
+    header = ("kind", "start (s)", "duration (s)", "axes: size (z)", "handling")
+    return [*md, _md_table(header, rows), "", f"Excised: {doc['excised_samples']} samples.", ""]
 
 
 def _params(effect: dict) -> str:

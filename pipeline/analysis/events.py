@@ -1,0 +1,464 @@
+"""Disturbance events found jointly on all axes (issue 13 item 1), handled by excision.
+
+A bump of the table, a short transient or a tilt episode shows at the same instant on several
+axes.  Found axis by axis it would be read as "bias steps" (often one edge only); here it is
+found once, on all axes together, and its interval is *excluded* for every axis: the
+gap-tolerant Allan variance (:mod:`imupipe.stats.allan`, ``excluded``) skips every term whose
+window touches it, and the loop's time-domain steps see it filled by linear interpolation.
+
+Detector (all on :data:`FINE_BLOCK_S` block means of each axis, spikes already removed):
+
+1. At each dyadic scale L = 1, 2, 4, … fine blocks (0.5 s … :data:`MAX_SCALE_S`), means of
+   windows of L blocks at a stride of L/2 (half-overlapping).  Residual r = window mean −
+   median of the 2·:data:`NEIGHBOURS` + 1 window means around it (±8 L in time): the local
+   level, robust against the event itself, following drift and wander slower than the window.
+2. Per axis and scale, a robust z-score z = r / s, with s the larger of 1.4826 × MAD(r) and the
+   (1 − p) quantile of |r| / Φ⁻¹(1 − p/2) (p = max(:data:`TAIL_P`, 10 / windows)), so a
+   heavy-tailed or quantised core is not taken for events.  Only windows with a full
+   neighbourhood are tested (none within 8 L of either end).
+3. A window is flagged when one axis has |z| > z₁ or at least two axes have |z| > z₂.  With M
+   tests (windows summed over all scales) and A axes, z₁ and z₂ are chosen so that under
+   independent Gaussian z each rule has a record-wide false-alarm probability of at most α/2
+   (Bonferroni over windows, scales and axes / axis pairs):
+   A · 2Φ̄(z₁) = α / (2M) and C(A, 2) · (2Φ̄(z₂))² = α / (2M), α = :data:`FALSE_ALARM`.
+4. Flagged windows that overlap are one event.  Its start and end: the box [a, b) of fine blocks
+   inside the flagged span that maximises the multi-axis box likelihood ratio
+   Σ_axes (Σ_{k∈[a,b)} x_k − level)² / ((b − a) v) (v: the fine-block variance; level: the
+   median outside the flagged span), on the axes that had |z| > z₂ in its flagged windows.
+5. Size per axis: mean inside − mean of the levels before and after (each the median of the
+   fine blocks over max(duration, :data:`LEVEL_SPAN_S`) next to the box).  **Step rule**: an
+   event is a *step* (a real bias step: kept, left to the loop's per-axis ``bias_step``
+   candidate) when, on its largest axis, the level after differs from the level before by
+   more than z₂ standard errors of a difference of two such adjacent means (robust scale of
+   the adjacent differences over the record) *and* by more than half the size inside the box.
+   Otherwise it is a *transient*, excised on every axis over [a, b) widened by
+   max(:data:`MARGIN_S`, :data:`MARGIN_FRACTION` × duration) each side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from math import comb
+from typing import Literal
+
+import numpy as np
+from scipy import ndimage, special
+
+from imupipe.model.effects import spike_candidate
+from imupipe.stats import robust
+
+FINE_BLOCK_S = 0.5
+"""Length of the block means the detector works on (at least one sample)."""
+MAX_SCALE_S = 512.0
+"""Longest window searched (s); a scale is searched only when at least :data:`MIN_WINDOWS`
+windows have a full neighbourhood."""
+NEIGHBOURS = 16
+"""Strided windows each side whose median is the local level (16 half-window strides = 8 L)."""
+MIN_WINDOWS = 40
+TAIL_P = 1e-3
+TAIL_WINDOWS = 10
+"""The tail-quantile scale is used only at scales with at least this many windows beyond
+its (1 − :data:`TAIL_P`) quantile (elsewhere the MAD alone: window means of many samples are
+Gaussian, and a few long events would hold a larger share of the windows)."""
+FALSE_ALARM = 1e-3
+"""Record-wide false-alarm probability of the detector (Gaussian, independent axes)."""
+LEVEL_SPAN_S = 60.0
+"""Shortest span over which the levels before and after an event are measured."""
+MARGIN_S = 1.0
+MARGIN_FRACTION = 0.05
+STEP_FRACTION = 0.5
+MAX_BOX_POINTS = 1024
+"""The box search of an event works on at most this many (merged) fine blocks."""
+
+EventKind = Literal["transient", "step"]
+
+
+@dataclass(frozen=True)
+class EventDetector:
+    """What the detector searched and its thresholds (report.json ``events.detector``)."""
+
+    fine_block_s: float
+    scales_s: tuple[float, ...]
+    windows: tuple[int, ...]
+    z_single: tuple[float, ...]
+    z_joint: tuple[float, ...]
+    axes: tuple[str, ...]
+    false_alarm: float = FALSE_ALARM
+
+    def as_dict(self) -> dict:
+        return {
+            "fine_block_s": self.fine_block_s,
+            "tests": sum(self.windows),
+            "axes": list(self.axes),
+            "false_alarm": self.false_alarm,
+            "scales": [
+                {"window_s": s, "windows": w, "z_single_axis": z1, "z_two_axes": z2}
+                for s, w, z1, z2 in zip(
+                    self.scales_s, self.windows, self.z_single, self.z_joint, strict=True
+                )
+            ],
+            "rule": (
+                "a window is an event when one axis has |z| > z_single_axis or two or more "
+                "axes have |z| > z_two_axes; each rule has a record-wide false-alarm "
+                "probability <= false_alarm / 2 (Bonferroni over the tests of all scales and "
+                "the axes / axis pairs; Student-t quantiles with the degrees of freedom of each "
+                "scale's noise estimate); an event whose level after differs from the "
+                "level before by more than z_two_axes standard errors and by more than half "
+                "its size is a step (kept), otherwise a transient (excised on every axis)"
+            ),
+        }
+
+
+@dataclass(frozen=True)
+class DisturbanceEvent:
+    """One event: where (fine blocks ``[first, stop)`` → seconds from the analysed record's
+    start), the axes it touches with its size (SI, axis unit) and z per axis, and how it was
+    handled (``excised``: samples ``[start, stop)`` excluded on every axis, or None)."""
+
+    start_s: float
+    duration_s: float
+    axes: tuple[str, ...]
+    size: dict[str, float]
+    level_change: dict[str, float]
+    z: dict[str, float]
+    kind: EventKind
+    excised: tuple[int, int] | None
+    scale_s: float
+    units: dict[str, str] = field(default_factory=dict)
+
+    def as_dict(self, tau0: float, t0_stamp_s: float) -> dict:
+        """report.json record (``t0_stamp_s``: the time of the analysed record's first sample
+        on the recording's time base, s since its first frame)."""
+        out = {
+            "kind": self.kind,
+            "start_s": self.start_s,
+            "start_recording_s": t0_stamp_s + self.start_s,
+            "duration_s": self.duration_s,
+            "axes": list(self.axes),
+            "size": {a: {"value": v, "unit": self.units.get(a, "")} for a, v in self.size.items()},
+            "level_change": {
+                a: {"value": v, "unit": self.units.get(a, "")} for a, v in self.level_change.items()
+            },
+            "z": self.z,
+            "scale_s": self.scale_s,
+            "handling": "excised on every axis"
+            if self.excised is not None
+            else "kept: a level change (bias step), left to the loop's per-axis bias_step",
+        }
+        if self.excised is not None:
+            a, b = self.excised
+            out["excised"] = {"start_s": a * tau0, "stop_s": b * tau0, "samples": b - a}
+        return out
+
+
+def fine_block(tau0: float) -> int:
+    """Samples per fine block (:data:`FINE_BLOCK_S`, at least 1)."""
+    return max(1, round(FINE_BLOCK_S / tau0))
+
+
+def fine_means(y: np.ndarray, tau0: float) -> np.ndarray:
+    """Means of consecutive :func:`fine_block` blocks of ``y`` (an incomplete last one dropped),
+    with the outliers of :func:`imupipe.model.effects.spike_candidate` removed first (a single
+    gross outlier is no event): the detector's input, one axis at a time."""
+    b = fine_block(tau0)
+    n = len(y) // b
+    means = np.asarray(y[: n * b], dtype=float).reshape(n, b).mean(axis=1)
+    found = spike_candidate(y, tau0)
+    if found is not None:
+        fix = found.spikes
+        keep = fix.index < n * b
+        np.subtract.at(means, fix.index[keep] // b, fix.value[keep] / b)
+    return means
+
+
+def thresholds(tests: int, axes: int, dof: float = np.inf) -> tuple[float, float]:
+    """(z₁, z₂) of the module docstring, step 3, as Student-t quantiles with ``dof`` degrees
+    of freedom of the scale estimate (normal quantiles when ``dof`` is inf); z₂ = inf with one
+    axis."""
+
+    def quantile(tail: float) -> float:  # upper quantile of t_dof (of N(0, 1): dof inf)
+        return float(-special.ndtri(tail) if np.isinf(dof) else special.stdtrit(dof, 1 - tail))
+
+    share = FALSE_ALARM / (2 * max(tests, 1))
+    z1 = quantile(share / (2 * axes))
+    if axes < 2:
+        return z1, np.inf
+    return z1, quantile(np.sqrt(share / comb(axes, 2)) / 2)
+
+
+WINSOR_C = 3.0
+WINSOR_VAR = float(
+    special.erf(WINSOR_C / np.sqrt(2))
+    - 2 * WINSOR_C * np.exp(-(WINSOR_C**2) / 2) / np.sqrt(2 * np.pi)
+    + WINSOR_C**2 * special.erfc(WINSOR_C / np.sqrt(2))
+)
+"""E[min(Z², c²)] of a standard normal Z (c = :data:`WINSOR_C`): the winsorised variance's
+Gaussian expectation, ≈ 0.995."""
+WINSOR_EFFICIENCY = 0.95
+"""Efficiency of the winsorised standard deviation against the sample one (Gaussian): the
+scale of J half-overlapping windows has about 0.95 × J / 2 degrees of freedom."""
+
+
+def _robust_scale(r: np.ndarray) -> float:
+    """Scale of the residuals (module docstring, step 2): the standard deviation of r
+    winsorised at ±:data:`WINSOR_C` × (1.4826 MAD) — a few event windows barely move it —
+    and, where there are enough windows (:data:`TAIL_WINDOWS`), at least the tail-quantile
+    scale, so a heavy-tailed or quantised core is not taken for events."""
+    r = np.ascontiguousarray(r)
+    sigma0 = robust.MAD_TO_SIGMA * robust.mad(r, center=0.0)
+    c = WINSOR_C * sigma0
+    sigma = float(np.sqrt(np.mean(np.clip(r, -c, c) ** 2) / WINSOR_VAR))
+    if len(r) * TAIL_P < TAIL_WINDOWS:
+        return sigma
+    tail = robust.abs_quantile(r, 1.0 - TAIL_P) / float(-special.ndtri(TAIL_P / 2))
+    return max(sigma, tail)
+
+
+@dataclass(frozen=True)
+class _Scale:
+    """z-scores of one scale: windows ``[starts, starts + length)`` (fine blocks), (J, A), and
+    the residual scale of each axis (its unit)."""
+
+    length: int
+    starts: np.ndarray
+    z: np.ndarray
+    sigma: np.ndarray
+
+    @property
+    def dof(self) -> float:
+        """Degrees of freedom of its scale estimate (:data:`WINSOR_EFFICIENCY`)."""
+        return WINSOR_EFFICIENCY * len(self.starts) / 2
+
+
+def _scales(x: np.ndarray, dt: float) -> list[_Scale]:
+    """The tested windows and their z (steps 1–2) at every searchable scale."""
+    n = len(x)
+    c = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    out = []
+    length = 1
+    while length * dt <= MAX_SCALE_S * (1 + 1e-9):
+        stride = max(1, length // 2)
+        starts = np.arange(0, n - length + 1, stride)
+        if len(starts) - 2 * NEIGHBOURS < MIN_WINDOWS:
+            break
+        m = (c[starts + length] - c[starts]) / length
+        r = m - ndimage.median_filter(m, size=(2 * NEIGHBOURS + 1, 1), mode="nearest")
+        inner = slice(NEIGHBOURS, len(starts) - NEIGHBOURS)
+        r = r[inner]
+        scale = np.array([_robust_scale(r[:, a]) for a in range(r.shape[1])])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.where(scale > 0, r / scale, 0.0)
+        out.append(_Scale(length, starts[inner], z, scale))
+        length *= 2
+    return out
+
+
+def _components(spans: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
+    """Overlapping or touching spans (k, 2) merged: (first, stop, indices of the spans)."""
+    order = np.argsort(spans[:, 0], kind="stable")
+    out: list[tuple[int, int, list[int]]] = []
+    for i in order:
+        a, b = int(spans[i, 0]), int(spans[i, 1])
+        if out and a <= out[-1][1]:
+            first, stop, members = out[-1]
+            out[-1] = (first, max(stop, b), [*members, int(i)])
+        else:
+            out.append((a, b, [int(i)]))
+    return [(a, b, np.array(m)) for a, b, m in out]
+
+
+def _best_box(e: np.ndarray, v: np.ndarray) -> tuple[int, int]:
+    """[a, b) of rows of ``e`` (residuals (L, A) from the level) maximising
+    Σ_A (Σ_{[a,b)} e)² / ((b − a) v) (step 4); rows merged to ≤ :data:`MAX_BOX_POINTS`."""
+    merge = max(1, -(-len(e) // MAX_BOX_POINTS))
+    k = len(e) // merge
+    if k < 1:
+        return 0, len(e)
+    coarse = e[: k * merge].reshape(k, merge, -1).sum(axis=1)
+    c = np.vstack([np.zeros((1, e.shape[1])), np.cumsum(coarse, axis=0)])
+    stat = np.zeros((k + 1, k + 1))
+    for j in range(e.shape[1]):
+        d = c[None, :, j] - c[:, None, j]  # d[a, b] = sum over [a, b)
+        stat += d * d / v[j]
+    length = np.arange(k + 1)[None, :] - np.arange(k + 1)[:, None]
+    stat = np.where(length > 0, stat / np.maximum(length, 1), -np.inf)
+    a, b = np.unravel_index(int(np.argmax(stat)), stat.shape)
+    return int(a) * merge, int(b) * merge
+
+
+def _adjacent_difference_scale(x: np.ndarray, width: int) -> float:
+    """Robust standard deviation of the difference of two adjacent means of ``width`` blocks
+    of ``x`` over the record (1.4826 × MAD of consecutive non-overlapping window means)."""
+    k = len(x) // width
+    if k < 3:
+        return np.inf
+    m = x[: k * width].reshape(k, width).mean(axis=1)
+    return robust.MAD_TO_SIGMA * robust.mad(np.diff(m))
+
+
+def find_events(
+    means: dict[str, np.ndarray], dt: float, samples_per_block: int, n_samples: int,
+    units: dict[str, str] | None = None,
+) -> tuple[list[DisturbanceEvent], EventDetector]:  # fmt: skip
+    """Events in the fine block means of the axes (``means``: {axis: (n_blocks,)}, equal
+    lengths; ``dt`` s per block of ``samples_per_block`` samples; the record has ``n_samples``
+    samples), found and classified as in the module docstring."""
+    names = tuple(means)
+    x = np.column_stack([means[a] for a in names])
+    scales = _scales(x, dt)
+    tests = sum(len(s.starts) for s in scales)
+    limits = [thresholds(tests, len(names), s.dof) for s in scales]
+    detector = EventDetector(
+        dt,
+        tuple(s.length * dt for s in scales),
+        tuple(len(s.starts) for s in scales),
+        tuple(z for z, _ in limits),
+        tuple(z for _, z in limits),
+        names,
+    )
+    spans, zs, ratios, lengths = [], [], [], []
+    for s, (z1, z2) in zip(scales, limits, strict=True):
+        a = np.abs(s.z)
+        top = np.sort(a, axis=1)[:, ::-1]
+        flag = top[:, 0] > z1
+        if a.shape[1] > 1:
+            flag |= top[:, 1] > z2
+        for j in np.flatnonzero(flag):
+            spans.append((s.starts[j], s.starts[j] + s.length))
+            zs.append(s.z[j])
+            ratios.append(a[j] / min(z1, z2))  # > 1: the axis takes part (step 4)
+            lengths.append(s.length)
+    if not spans:
+        return [], detector
+    spans_a, zs_a, ratios_a = np.array(spans), np.array(zs), np.array(ratios)
+    fine_v = np.array([(robust.MAD_TO_SIGMA * robust.mad(x[:, j], differences=True)) ** 2 / 2
+                       for j in range(len(names))])  # fmt: skip
+    fine_v = np.where(fine_v > 0, fine_v, np.var(x, axis=0) + 1e-300)
+    z_step = min(thresholds(tests, len(names)))
+    events = []
+    for first, stop, members in _components(spans_a):
+        zmax = np.max(np.abs(zs_a[members]), axis=0)
+        touched = np.flatnonzero(np.max(ratios_a[members], axis=0) > 1)
+        events.append(
+            _event(x, names, touched, first, stop, zmax, fine_v, dt, samples_per_block,
+                   n_samples, z_step, units or {}, max(lengths[i] for i in members) * dt)
+        )  # fmt: skip
+    return events, detector
+
+
+def _level(x: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    lo, hi = max(lo, 0), min(hi, len(x))
+    return np.median(x[lo:hi], axis=0) if hi > lo else np.full(x.shape[1], np.nan)
+
+
+def _event(
+    x: np.ndarray, names: tuple[str, ...], touched: np.ndarray, first: int, stop: int,
+    zmax: np.ndarray, fine_v: np.ndarray, dt: float, per_block: int, n_samples: int,
+    z_step: float, units: dict[str, str], scale_s: float,
+) -> DisturbanceEvent:  # fmt: skip
+    """One merged component of flagged windows as an event (steps 4–5)."""
+    span = max(stop - first, round(LEVEL_SPAN_S / dt))
+    outside = np.concatenate([x[max(first - span, 0) : first], x[stop : stop + span]])
+    level = np.median(outside, axis=0) if len(outside) else np.median(x, axis=0)
+    sub = x[first:stop][:, touched] - level[touched]
+    a, b = _best_box(sub, fine_v[touched])
+    a, b = first + a, first + b
+    width = max(b - a, round(LEVEL_SPAN_S / dt))
+    before, after = _level(x, a - width, a), _level(x, b, b + width)
+    ends = np.nanmean(np.vstack([before, after]), axis=0)  # the level either side
+    inside = x[a:b].mean(axis=0)
+    size = inside - ends
+    change = np.where(np.isnan(before) | np.isnan(after), 0.0, after - before)
+    main = touched[int(np.argmax(np.abs(zmax[touched])))]
+    se = _adjacent_difference_scale(x[:, main], width)
+    is_step = bool(
+        abs(change[main]) > z_step * se and abs(change[main]) > STEP_FRACTION * abs(size[main])
+    )
+    excised = None
+    if not is_step:
+        margin = max(MARGIN_S, MARGIN_FRACTION * (b - a) * dt)
+        m = round(margin / dt)
+        excised = (max(0, (a - m) * per_block), min(n_samples, (b + m) * per_block))
+    axes = tuple(names[j] for j in touched)
+    return DisturbanceEvent(
+        start_s=a * dt,
+        duration_s=(b - a) * dt,
+        axes=axes,
+        size={names[j]: float(size[j]) for j in touched},
+        level_change={names[j]: float(change[j]) for j in touched},
+        z={names[j]: float(zmax[j]) for j in touched},
+        kind="step" if is_step else "transient",
+        excised=excised,
+        scale_s=scale_s,
+        units={n: units[n] for n in axes if n in units},
+    )
+
+
+def event_mask(events: list[DisturbanceEvent], n: int) -> np.ndarray | None:
+    """bool (n,) True on every excised event's samples, or None when none is excised."""
+    cut = [e.excised for e in events if e.excised is not None]
+    if not cut:
+        return None
+    mask = np.zeros(n, dtype=bool)
+    for a, b in cut:
+        mask[a:b] = True
+    return mask
+
+
+@dataclass(frozen=True)
+class EventsFound:
+    """The detector's result on one record (report.json ``events``): ``tau0_s`` the sampling
+    interval and ``t0_stamp_s`` the time of the analysed record's first sample on the
+    recording's time base (s since its first frame; not 0 when a later segment is analysed)."""
+
+    detector: EventDetector
+    events: tuple[DisturbanceEvent, ...]
+    tau0_s: float
+    t0_stamp_s: float
+
+    def as_dict(self) -> dict:
+        excised = [e.excised for e in self.events if e.excised is not None]
+        return {
+            "detector": self.detector.as_dict(),
+            "found": [e.as_dict(self.tau0_s, self.t0_stamp_s) for e in self.events],
+            "excised_samples": int(sum(b - a for a, b in excised)),
+        }
+
+    def warnings(self) -> list[str]:
+        """One line per event for the report's warnings."""
+        return [
+            f"disturbance event ({e.kind}) at {e.start_s:.1f} s for {e.duration_s:.1f} s on "
+            f"{', '.join(e.axes)}: "
+            + (
+                "excised on every axis"
+                if e.excised is not None
+                else "a lasting level change, left to the loop (bias step)"
+            )
+            for e in self.events
+        ]
+
+
+def detect(
+    means: dict[str, np.ndarray], tau0: float, n_samples: int, units: dict[str, str],
+    t0_stamp_s: float,
+) -> EventsFound:  # fmt: skip
+    """:func:`find_events` on the :func:`fine_means` of the analysed axes."""
+    b = fine_block(tau0)
+    events, detector = find_events(means, b * tau0, b, n_samples, units)
+    return EventsFound(detector, tuple(events), tau0, t0_stamp_s)
+
+
+def fill_excised(y: np.ndarray, events: EventsFound) -> np.ndarray:
+    """``y`` with every excised event's samples replaced by the straight line between the
+    means of the fine block before and after it (a copy; ``y`` itself when none is excised):
+    what the loop's time-domain steps see there (its Allan sums skip those samples)."""
+    cut = [e.excised for e in events.events if e.excised is not None]
+    if not cut:
+        return y
+    y = np.array(y, dtype=float)
+    k = fine_block(events.tau0_s)
+    for a, b in cut:
+        left = y[max(0, a - k) : a].mean() if a > 0 else y[b : b + k].mean()
+        right = y[b : b + k].mean() if b < len(y) else left
+        y[a:b] = np.linspace(left, right, b - a + 2)[1:-1]
+    return y

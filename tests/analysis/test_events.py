@@ -1,0 +1,285 @@
+"""Disturbance events found jointly on all axes and excised (issue 13 item 1).
+
+The pipeline cases write a ROS 2 Imu MCAP (white + flicker noise of known N and B on six
+axes), analyse it with ``imupipe.analyze`` and read report.json; the threshold cases call the
+detector on fine block means of unit white noise, where the z of an injected box is known.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import imupipe
+from imupipe.analysis import events as ev
+from imupipe.io.mcap_bulk import BulkWriter
+from imupipe.testing.ros_cdr import imu_payloads
+from imupipe.vocab import AXES
+
+SCHEMA = Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json"
+RATE_HZ = 100.0
+MINUTES = 40
+N_TRUE = np.array([3e-4, 3e-4, 3e-4, 2e-3, 2e-3, 2e-3])  # unit/sqrt(Hz)
+B_TRUE = np.array([2e-4, 2e-4, 2e-4, 1e-3, 1e-3, 1e-3])  # unit (flicker S = B^2 / (2 pi f))
+BUMP = {"start_s": 1200.0, "duration_s": 20.0, "axes": ("gyro_y", "accel_x", "accel_z")}
+
+
+def noise(seed: int) -> np.ndarray:
+    """(n, 6) white + flicker rate noise with N_TRUE, B_TRUE (IEEE 952 Annex C PSDs)."""
+    n = int(MINUTES * 60 * RATE_HZ)
+    rng = np.random.default_rng(seed)
+    tau0 = 1 / RATE_HZ
+    f = np.fft.rfftfreq(2 * n, tau0)
+    shape = np.zeros_like(f)
+    shape[1:] = np.sqrt(2 * n / tau0 / (2 * np.pi * f[1:]))
+    out = np.empty((n, 6))
+    for j in range(6):
+        bins = shape * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size))
+        flicker = np.fft.irfft(bins / np.sqrt(2), 2 * n)[:n] * B_TRUE[j]
+        out[:, j] = N_TRUE[j] / np.sqrt(tau0) * rng.standard_normal(n) + flicker
+    out[:, 5] += 9.80665
+    return out
+
+
+def bump_size(j: int) -> float:
+    """12 x the Allan deviation of axis j at the bump's duration (N^2/tau + 0.44 B^2)."""
+    tau = BUMP["duration_s"]
+    return float(12 * np.sqrt(N_TRUE[j] ** 2 / tau + 2 * np.log(2) / np.pi * B_TRUE[j] ** 2))
+
+
+def with_bump(y: np.ndarray) -> np.ndarray:
+    """The bump: +-:func:`bump_size` (alternating signs) on three axes."""
+    y = y.copy()
+    t = np.arange(len(y)) / RATE_HZ
+    inside = (t >= BUMP["start_s"]) & (t < BUMP["start_s"] + BUMP["duration_s"])
+    for k, name in enumerate(BUMP["axes"]):
+        j = AXES.index(name)
+        y[inside, j] += (-1) ** k * bump_size(j)
+    return y
+
+
+def write_mcap(path: Path, y: np.ndarray) -> Path:
+    stamps = 1_700_000_000_000_000_000 + np.arange(len(y), dtype=np.int64) * 10_000_000
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        sid = w.register_schema("sensor_msgs/msg/Imu", "ros2msg", b"")
+        cid = w.register_channel("/imu", "cdr", sid)
+        for i in range(0, len(y), 1 << 16):
+            s = slice(i, i + (1 << 16))
+            w.write_chunk(cid, stamps[s], imu_payloads(stamps[s], y[s, :3], y[s, 3:]))
+        w.finish()
+    return path
+
+
+def analysed(tmp: Path, y: np.ndarray, events: bool = True) -> dict:
+    path = write_mcap(tmp / "imu.mcap", y)
+    out = tmp / f"out_{events}"
+    imupipe.analyze(path, out, rrd=False, figures=False, loop=False, events=events)
+    return json.loads((out / "report.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def reports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
+    """report.json of the same noise: clean, with the bump, with the bump and no event search."""
+    y = noise(7)
+    bumped = with_bump(y)
+    return {
+        "clean": analysed(tmp_path_factory.mktemp("clean"), y),
+        "bump": analysed(tmp_path_factory.mktemp("bump"), bumped),
+        "bump_kept": analysed(tmp_path_factory.mktemp("kept"), bumped, events=False),
+    }
+
+
+def schema_errors(doc: object, schema: dict, root: dict, where: str = "$") -> list[str]:
+    """Required keys, types, const/enum, items and additionalProperties of a JSON Schema subset
+    (copied from tests/test_report.py: test files do not import each other)."""
+    if "$ref" in schema:
+        schema = root["$defs"][schema["$ref"].rsplit("/", 1)[-1]]
+    types = {
+        "object": dict,
+        "array": list,
+        "string": str,
+        "number": (int, float),
+        "integer": int,
+        "null": type(None),
+    }
+    errors = []
+    if "type" in schema:
+        allowed = schema["type"] if isinstance(schema["type"], list) else [schema["type"]]
+        ok = any(isinstance(doc, types[t]) and not isinstance(doc, bool) for t in allowed)
+        if not ok:
+            return [f"{where}: {type(doc).__name__} is not {allowed}"]
+    if "const" in schema and doc != schema["const"]:
+        errors.append(f"{where}: {doc!r} != {schema['const']!r}")
+    if "enum" in schema and doc not in schema["enum"]:
+        errors.append(f"{where}: {doc!r} not in {schema['enum']}")
+    if isinstance(doc, dict):
+        errors += [f"{where}: missing {k}" for k in schema.get("required", []) if k not in doc]
+        names = schema.get("propertyNames", {}).get("enum")
+        errors += [f"{where}: key {k} not allowed" for k in doc if names and k not in names]
+        props = schema.get("properties", {})
+        extra = schema.get("additionalProperties")
+        for key, value in doc.items():
+            sub = props.get(key, extra if isinstance(extra, dict) else None)
+            if sub is not None:
+                errors += schema_errors(value, sub, root, f"{where}.{key}")
+    if isinstance(doc, list) and "items" in schema:
+        for i, value in enumerate(doc):
+            errors += schema_errors(value, schema["items"], root, f"{where}[{i}]")
+    return errors
+
+
+def test_three_axis_bump_is_found_once_with_its_start_duration_axes_and_size(reports) -> None:
+    doc = reports["bump"]
+    schema = json.loads(SCHEMA.read_text())
+    assert schema_errors(doc, schema, schema) == []
+    (found,) = doc["events"]["found"]
+    assert found["kind"] == "transient"
+    assert tuple(found["axes"]) == BUMP["axes"]
+    assert found["start_s"] == pytest.approx(BUMP["start_s"], abs=1.0)  # one fine block (0.5 s)
+    assert found["duration_s"] == pytest.approx(BUMP["duration_s"], abs=1.5)
+    assert found["size"]["accel_x"]["value"] == pytest.approx(-bump_size(3), rel=0.25)
+    assert found["size"]["accel_x"]["unit"] == "m/s^2"
+    assert found["size"]["gyro_y"]["unit"] == "rad/s"
+    assert found["size"]["accel_x"]["value"] * found["size"]["gyro_y"]["value"] < 0  # signs
+    assert any("disturbance event (transient) at 1200" in w for w in doc["input"]["warnings"])
+
+
+def test_the_bump_is_excised_on_every_axis_and_the_terms_return_to_the_clean_ones(
+    reports,
+) -> None:
+    doc, clean = reports["bump"], reports["clean"]
+    (found,) = doc["events"]["found"]
+    cut = found["excised"]
+    k = cut["samples"]
+    assert cut["start_s"] <= BUMP["start_s"] and cut["stop_s"] >= sum(
+        BUMP[x] for x in ("start_s", "duration_s")
+    )
+    assert doc["events"]["excised_samples"] == k
+    for name in AXES:  # every axis, touched or not: runs of n - k samples, k + 2m - 1 terms lost
+        allan = doc["axes"][name]["allan"]
+        m = np.round(np.asarray(allan["tau_s"]) * RATE_HZ).astype(int)
+        lost = np.asarray(clean["axes"][name]["allan"]["n_terms"])[: len(m)] - allan["n_terms"]
+        np.testing.assert_array_equal(lost[m < 1000], (k + 2 * m - 1)[m < 1000])
+    for name in BUMP["axes"]:
+        j = AXES.index(name)
+        terms = {c: reports[c]["axes"][name]["ieee952"] for c in ("bump", "clean")}
+        n_hat = {c: t["random_walk"]["value"] for c, t in terms.items()}
+        b_hat = {c: t["bias_instability"]["value"] for c, t in terms.items()}
+        assert n_hat["bump"] == pytest.approx(N_TRUE[j], rel=0.02)
+        assert n_hat["bump"] == pytest.approx(n_hat["clean"], rel=0.005)
+        assert b_hat["bump"] == pytest.approx(b_hat["clean"], rel=0.10)
+        assert b_hat["bump"] == pytest.approx(B_TRUE[j], rel=0.30)
+        # what the excision undoes: the bump raises the deviation near its duration
+        adev = {c: np.asarray(r["axes"][name]["allan"]["adev"]) for c, r in reports.items()}
+        k = int(np.argmin(np.abs(np.asarray(clean["axes"][name]["allan"]["tau_s"]) - 20.0)))
+        assert adev["bump_kept"][k] > 1.15 * adev["clean"][k]
+        assert adev["bump"][k] == pytest.approx(adev["clean"][k], rel=0.03)
+
+
+def test_clean_recording_yields_no_event_and_unchanged_numbers(reports, tmp_path) -> None:
+    clean = reports["clean"]
+    assert clean["events"]["found"] == [] and clean["events"]["excised_samples"] == 0
+    assert clean["events"]["detector"]["tests"] > 10_000
+    off = analysed(tmp_path, noise(7), events=False)
+    assert "events" not in off
+    for name in AXES:
+        assert clean["axes"][name]["allan"] == off["axes"][name]["allan"]
+
+
+# --- the acceptance thresholds, on unit white noise of fine block means ---------------------
+
+DT = ev.FINE_BLOCK_S
+BLOCKS = 28_800  # 4 h of 0.5 s blocks
+BOX = 16  # blocks: one window at the 8 s scale covers it exactly
+AT = 9_600  # a multiple of the 8 s scale's stride
+
+
+def unit_means(seed: int, axes: int = 6) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return {AXES[j]: rng.standard_normal(BLOCKS) for j in range(axes)}
+
+
+def limits(means: dict[str, np.ndarray]) -> tuple[float, float, np.ndarray]:
+    """(z1, z2, residual scale of each axis) of the 8 s scale, whose windows cover the box."""
+    x = np.column_stack(list(means.values()))
+    (scale,) = [s for s in ev._scales(x, DT) if s.length == BOX]
+    _, det = ev.find_events(means, DT, 50, BLOCKS * 50)
+    k = det.scales_s.index(BOX * DT)
+    return det.z_single[k], det.z_joint[k], scale.sigma
+
+
+def with_box(
+    means: dict[str, np.ndarray], heights: dict[str, float], sigma: np.ndarray
+) -> dict[str, np.ndarray]:
+    """A box of ``heights`` (z units of the 8 s scale) on the named axes."""
+    out = {a: v.copy() for a, v in means.items()}
+    for a, z in heights.items():
+        out[a][AT : AT + BOX] += z * sigma[AXES.index(a)]
+    return out
+
+
+def found(means: dict[str, np.ndarray]) -> list[ev.DisturbanceEvent]:
+    return ev.find_events(means, DT, 50, BLOCKS * 50)[0]
+
+
+@pytest.mark.parametrize("factor, expected", [(1.2, 1), (0.8, 0)])
+def test_single_axis_threshold(factor: float, expected: int) -> None:
+    means = unit_means(1)
+    z1, _, sigma = limits(means)
+    events = found(with_box(means, {"gyro_z": factor * z1}, sigma))
+    assert len(events) == expected
+    if expected:
+        assert events[0].axes == ("gyro_z",) and events[0].start_s == AT * DT
+
+
+@pytest.mark.parametrize("second, expected", [(1.2, 1), (0.8, 0)])
+def test_two_axis_threshold(second: float, expected: int) -> None:
+    """Both axes above z2 (each far below z1): an event; the second below z2: none."""
+    means = unit_means(2)
+    z1, z2, sigma = limits(means)
+    assert 1.2 * z2 < 0.9 * z1
+    events = found(with_box(means, {"gyro_x": 1.2 * z2, "accel_y": -second * z2}, sigma))
+    assert len(events) == expected
+    if expected:
+        assert events[0].axes == ("gyro_x", "accel_y") and events[0].kind == "transient"
+        assert events[0].duration_s == pytest.approx(BOX * DT, abs=DT)
+
+
+@pytest.mark.parametrize("after, kind", [(0.6, "step"), (0.0, "transient")])
+def test_step_rule(after: float, kind: str) -> None:
+    """An event that leaves the level changed by more than noise and than half its size is a
+    step (kept), one whose level returns is a transient (excised)."""
+    means = unit_means(3)
+    height = 3.0  # per block: far beyond every threshold
+    for a in ("accel_x", "accel_y"):
+        means[a][AT : AT + 60] += height
+        means[a][AT + 60 :] += after * height
+    (event,) = found(means)
+    assert event.kind == kind
+    assert (event.excised is None) == (kind == "step")
+    assert event.start_s == pytest.approx(AT * DT, abs=DT)
+    assert set(event.axes) == {"accel_x", "accel_y"}
+    assert event.level_change["accel_x"] == pytest.approx(after * height, abs=0.2)
+
+
+def test_a_lasting_level_change_alone_is_no_event() -> None:
+    """The local level is a running median, which keeps edges: a bias step without a
+    transient leaves no residual and is left to the loop's bias_step candidate."""
+    means = unit_means(3)
+    means["accel_x"][AT:] += 3.0
+    assert found(means) == []
+
+
+def test_fill_excised_draws_a_line_between_the_levels_either_side() -> None:
+    y = np.concatenate([np.full(100, 1.0), np.full(40, 50.0), np.full(100, 3.0)])
+    event = ev.DisturbanceEvent(1.0, 0.4, ("gyro_x",), {}, {}, {}, "transient", (100, 140), 0.5)
+    det = ev.EventDetector(DT, (), (), (), (), ("gyro_x",))
+    filled = ev.fill_excised(y, ev.EventsFound(det, (event,), 0.01, 0.0))
+    np.testing.assert_allclose(filled[100:140], np.linspace(1.0, 3.0, 42)[1:-1])
+    assert filled[:100].tolist() == y[:100].tolist() and y[120] == 50.0
+    mask = ev.event_mask([event], 240)
+    assert mask.sum() == 40 and mask[100] and not mask[140]
