@@ -606,7 +606,8 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         if cand.spikes is None:
             cand.p_value = min(1.0, cand.p_value * n_tests)
             cand.evidence |= {"p_value_family": cand.p_value, "n_time_domain_tests": n_tests}
-        margin = 2 * np.log(ALPHA / cand.p_value)
+        # a p-value that underflowed to 0 ranks as the smallest positive double, not a crash
+        margin = 2 * np.log(ALPHA / max(cand.p_value, np.finfo(float).tiny))
         trials.append(Trial(cand.kind, cand, float(margin), flags_ok, new_state, lambda h=hold: h))
     for kind, grid in _grids(tau, ax.tau_min).items():
         if kind in state.columns:

@@ -71,3 +71,15 @@ def test_sinusoid_found_with_frequency_and_amplitude(base):
     assert eff.intervals["frequency_hz"][0] < f0 < eff.intervals["frequency_hz"][1]
     assert eff.intervals["amplitude"][0] < amp < eff.intervals["amplitude"][1]
     assert res.after.error < res.before.error
+
+
+def test_a_strong_temperature_coupling_is_found_not_a_crash(base):
+    """0.23 °/s per °C: the time-domain p-value underflows to 0; the loop ranks it (it raised
+    ZeroDivisionError) and accepts the coupling with its coefficient."""
+    rng, y = base(10)
+    temp = temperature(N, rng)
+    k_true = 4e-3  # rad/s per °C
+    res = run(y + k_true * (temp - temp.mean()), temp)
+    assert [e.kind for e in res.accepted][:1] == ["temperature"]
+    lo, hi = res.accepted[0].intervals["coefficient"]
+    assert lo < k_true < hi
