@@ -22,8 +22,7 @@ The end-to-end cases are tuned (amplitude of the effect, seed 11): each asserts 
 that makes it the case it is (e.g. 2 < ΔBIC < 10) before the decision, so a change of the model
 that moves it out of its window fails with that message, and the amplitude is re-tuned.
 
-``synth_rate``, ``N_TRUE`` and ``B_TRUE`` are copied from tests/test_ieee952.py (no imports
-between test files).
+The noise is the ``paper_gyro`` fixture (tests/model/conftest.py).
 """
 
 from __future__ import annotations
@@ -449,44 +448,35 @@ def test_options_searched_are_counted_in_the_evidence():
 # close_loop end to end: 3.6 h at 10 Hz of white + flicker noise (the paper's gyro) plus one
 # effect, seed 11; the cases are tuned (see the module doc)
 
-DEG = np.pi / 180
-N_TRUE, B_TRUE = 0.05 * DEG, 0.008 * DEG  # copied from tests/test_ieee952.py
 TAU0, N = 0.1, 2**17
 F0 = 0.02  # Hz
 
 
-def synth_rate(n, tau0, rng, n_white=0.0, b_flicker=0.0):
-    """White N and flicker B rate samples (SI); copied from tests/test_ieee952.py (white and
-    flicker part)."""
-    fs = 1 / tau0
-    y = n_white / np.sqrt(tau0) * rng.standard_normal(n)
-    if b_flicker:  # synthesised 8x longer and cut, so the record is not periodic
-        f = np.fft.rfftfreq(8 * n, tau0)
-        shape = np.zeros_like(f)
-        shape[1:] = np.sqrt(b_flicker**2 / (2 * np.pi * f[1:]) * fs)  # two-sided S, IEEE 952
-        y += np.fft.irfft(np.fft.rfft(rng.standard_normal(8 * n)) * shape, 8 * n)[:n]
-    return y
+@pytest.fixture(scope="module")
+def run_axis(paper_gyro):
+    """``run_axis(effect, amplitude)``: the loop's result on the paper's gyro noise (seed 11)
+    plus one effect, computed once per (effect, amplitude)."""
 
+    @cache
+    def run(effect: str, amplitude: float) -> LoopResult:
+        rng = np.random.default_rng(11)
+        y = paper_gyro.rate(N, TAU0, rng)
+        t = np.arange(N) * TAU0
+        temp = None
+        if effect == "sinusoid":
+            y = y + amplitude * np.sin(2 * np.pi * F0 * t + 0.3)
+        elif effect == "sinusoid_halves":  # the second half at a third of the amplitude
+            half = np.where(t < t[-1] / 2, amplitude, amplitude / 3)
+            y = y + half * np.sin(2 * np.pi * F0 * t + 0.3)
+        elif effect == "temperature":  # warm-up and wander quantised to 0.136 °C (ADIS16364)
+            wander = np.cumsum(rng.standard_normal(N)) * 2e-3
+            temp = np.round((25 + 3 * (1 - np.exp(-t / 1800)) + wander) / 0.136) * 0.136
+            y = y + amplitude * (temp - temp.mean())
+        curve = allan_curves(y, TAU0)[0]
+        signals = AxisSignals("gyro_x", "gyro", y, TAU0, aux_block_means(temp, TAU0), None)
+        return close_loop(signals, curve)
 
-def _axis(effect: str, amplitude: float) -> LoopResult:
-    rng = np.random.default_rng(11)
-    y = synth_rate(N, TAU0, rng, N_TRUE, B_TRUE)
-    t = np.arange(N) * TAU0
-    temp = None
-    if effect == "sinusoid":
-        y = y + amplitude * np.sin(2 * np.pi * F0 * t + 0.3)
-    elif effect == "sinusoid_halves":  # the second half at a third of the amplitude
-        y = y + np.where(t < t[-1] / 2, amplitude, amplitude / 3) * np.sin(2 * np.pi * F0 * t + 0.3)
-    elif effect == "temperature":  # warm-up and wander quantised to 0.136 °C (ADIS16364)
-        wander = np.cumsum(rng.standard_normal(N)) * 2e-3
-        temp = np.round((25 + 3 * (1 - np.exp(-t / 1800)) + wander) / 0.136) * 0.136
-        y = y + amplitude * (temp - temp.mean())
-    curve = allan_curves(y, TAU0)[0]
-    signals = AxisSignals("gyro_x", "gyro", y, TAU0, aux_block_means(temp, TAU0), None)
-    return close_loop(signals, curve)
-
-
-run_axis = cache(_axis)
+    return run
 
 
 def _candidate(res: LoopResult, kind: str):
@@ -495,7 +485,7 @@ def _candidate(res: LoopResult, kind: str):
     return rec
 
 
-def test_sinusoid_past_every_rule_is_accepted_with_its_errors():
+def test_sinusoid_past_every_rule_is_accepted_with_its_errors(run_axis):
     res = run_axis("sinusoid", 3e-4)
     assert [e.kind for e in res.accepted] == ["sinusoid"]
     eff = res.accepted[0]
@@ -512,7 +502,7 @@ def test_sinusoid_past_every_rule_is_accepted_with_its_errors():
     assert set(model["terms"]) >= {"random_walk", "bias_instability", "sinusoid"}
 
 
-def test_sinusoid_under_the_delta_bic_threshold_is_rejected_for_it_alone():
+def test_sinusoid_under_the_delta_bic_threshold_is_rejected_for_it_alone(run_axis):
     """Amplitude 1.27e-4 rad/s: the periodogram line is clear, ΔBIC ≈ 6 (2 < ΔBIC < 10)."""
     rec = _candidate(run_axis("sinusoid", 1.27e-4), "sinusoid")
     dbic = rec.evidence["avar_delta_bic"]
@@ -522,7 +512,7 @@ def test_sinusoid_under_the_delta_bic_threshold_is_rejected_for_it_alone():
     assert rec.evidence["holdout"] == {"holds": None}  # not significant: hold-out not run
 
 
-def test_sinusoid_in_one_half_only_does_not_hold_out_of_sample():
+def test_sinusoid_in_one_half_only_does_not_hold_out_of_sample(run_axis):
     """Amplitude 5e-4 rad/s in the first half, 1.7e-4 in the second: significant on the whole
     record, but the term fitted on the first half overshoots the second (its deviance rises)
     while the one fitted on the second half improves the first: one half is not enough."""
@@ -534,7 +524,7 @@ def test_sinusoid_in_one_half_only_does_not_hold_out_of_sample():
     assert rec.reason == "does not hold out of sample"
 
 
-def test_temperature_coupling_past_bonferroni_is_accepted():
+def test_temperature_coupling_past_bonferroni_is_accepted(run_axis):
     res = run_axis("temperature", 4e-4)
     assert [e.kind for e in res.accepted] == ["temperature"]
     ev = res.accepted[0].evidence
@@ -543,7 +533,7 @@ def test_temperature_coupling_past_bonferroni_is_accepted():
     assert ev["holdout"]["holds"] is True
 
 
-def test_temperature_coupling_significant_only_before_the_family_factor_is_rejected():
+def test_temperature_coupling_significant_only_before_the_family_factor_is_rejected(run_axis):
     """Coupling 3.6e-4 rad/s/°C: p 5.6e-4 over its own 6 options, × 3 time-domain candidates
     tried in the round = 1.7e-3 ≥ α."""
     rec = _candidate(run_axis("temperature", 3.6e-4), "temperature")
@@ -554,7 +544,7 @@ def test_temperature_coupling_significant_only_before_the_family_factor_is_rejec
     assert ev["holdout"] == {"holds": None}
 
 
-def test_candidates_not_significant_on_a_clean_axis_are_rejected_with_family_p():
+def test_candidates_not_significant_on_a_clean_axis_are_rejected_with_family_p(run_axis):
     """Clean axis (the temperature run's noise without coupling): every time-domain p is the
     per-candidate Bonferroni p times 3, capped at 1, and the reason shows it."""
     res = run_axis("temperature", 0.0)
