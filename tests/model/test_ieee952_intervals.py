@@ -241,6 +241,9 @@ def test_fit_start_drops_short_tau_points_that_break_the_model() -> None:
     assert tau_min == 0.04
     assert "tau = 0.01, 0.02 s left out" in note
     assert ieee952.fit_start(tau, 1e-6 / tau, np.full_like(tau, 1e4))[0] == 0.01
+    # starts are tried over the first third of the 16 octave points: up to 5 can be left out
+    avar[:5] = 3e-6 / tau[:5]
+    assert ieee952.fit_start(tau, avar, np.full_like(tau, 1e4))[0] == 0.32
 
 
 def test_degrees_of_freedom_are_points_minus_parameters() -> None:
