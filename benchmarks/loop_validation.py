@@ -41,10 +41,10 @@ import independent_generator as gen
 EXPECTED = {
     "temperature": {"temperature"},
     "sinusoid": {"sinusoid"},
-    "narrowband": {"narrowband"},  # no such loop kind yet: never right (issue 13 item 3)
+    "narrowband": {"narrowband"},
     "gauss_markov": {"gauss_markov"},
     "bias_step": {"bias_step"},
-    "ramp": {"rate_ramp", "R term"},
+    "ramp": {"ramp", "rate_ramp", "R term"},
     "warmup": {"rate_ramp"},
     "event": {"event"},  # joint multi-axis events are not built yet (issue 13 item 1)
     "outliers": {"outliers", "spike"},

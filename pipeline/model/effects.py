@@ -74,7 +74,8 @@ def oscillator_avar(tau: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
 
     Autocovariance R(t) = e^{−a|t|} (cos ωd t + (a/ωd) sin ωd|t|), ωd = 2π ``f0`` (Hz), damping
     a = π ``width_hz`` (the line's full width at half power, Hz); its two-sided PSD is
-    2a(a² + ω0²) / ((ω0² − ω²)² + 4a²ω²) (ω0² = ωd² + a²), the resonance of x'' + 2a x' + ω0² x = w
+    S(f) = 4aω0² / ((ω0² − ω²)² + 4a²ω²) at ω = 2πf (ω0² = ωd² + a²), the resonance of
+    x'' + 2a x' + ω0² x = w
     (Papoulis, *Probability, Random Variables and Stochastic Processes*, §10; Maybeck, *Stochastic
     Models* vol. 1, §4.10).  For a stationary rate with autocovariance R, averaging over τ and
     differencing gives (Allan 1966; equal to 4∫ S(f) sin⁴(πfτ)/(πfτ)² df of IEEE Std 952-1997
@@ -84,7 +85,7 @@ def oscillator_avar(tau: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
 
     and with R(t) = Re[c e^{−st}], s = a − iωd, c = 1 − i a/ωd, in closed form
     Φ(τ) = Re[c (τ/s − (1 − e^{−sτ})/s²)].  ``width_hz`` → 0 gives a random-phase sinusoid of
-    variance 1 (:func:`sinusoid_avar` × 2); f0 → 0 a first-order Gauss–Markov process.
+    variance 1 (:func:`sinusoid_avar` × 2).
     """
     tau = np.asarray(tau, dtype=float)
     a, wd = np.pi * width_hz, 2 * np.pi * f0

@@ -398,7 +398,7 @@ class CompositeFit:
 
         best = float(self.coef[j])
         lo = 0.0
-        if excess(0.0) > 0:
+        if best > 0 and excess(0.0) > 0:  # a coefficient at its bound 0 has lo = 0
             lo = optimize.brentq(excess, 0.0, best, xtol=1e-6 * best, rtol=1e-6)
         # upper end: double from the fit (or from a tiny fraction of the data's level) until
         # the deviance rises past the limit
