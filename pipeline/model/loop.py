@@ -347,6 +347,7 @@ N_SHAPE = {"sinusoid": 1, "gauss_markov": 1, "narrowband": 2, "prefilter": 2}
 """Nonlinear shape parameters of each AVAR-column kind (frequency; Tc; centre and width;
 filter family and length)."""
 MAX_LINES = 3  # narrowband lines per axis (a fundamental and its harmonics)
+LINE_SEEDS = (0.005, 0.04, 0.3)  # relative widths of the coarse line search
 LINE_WIDTHS = 14  # line widths profiled at the spectrum's centre
 LINE_CENTRES = 9  # centres profiled around it
 PROFILE_SHAPES = 12  # shapes whose value intervals make up a profile interval
@@ -439,9 +440,10 @@ def _column_profile(
 
 def _grids(ax: _Axis, state: _State) -> dict[str, list[tuple]]:
     """Shape parameters searched per kind: sinusoid frequencies (Hz) and Gauss–Markov Tc (s)
-    whose AVAR peak (0.371/f0, 1.89 Tc) lies in the fitted τ range; for a narrowband line those
-    frequencies away from the lines already modelled (a sinusoid-shaped seed search, refined
-    on the spectrum and in width by :func:`_narrowband_refine`); prefilters of each
+    whose AVAR peak (0.371/f0, 1.89 Tc) lies in the fitted τ range; for a narrowband line every
+    second of those frequencies away from the lines already modelled × :data:`LINE_SEEDS`
+    relative widths (a coarse search, refined on the spectrum and in width by
+    :func:`_narrowband_refine`); prefilters of each
     family (:data:`effects.PREFILTERS`) from a quarter sample to 20 samples long."""
     tau, tau_min, tau0 = ax.tau, ax.tau_min, ax.sig.tau0
     freqs = 0.371 / np.geomspace(max(tau[0], tau_min), tau[-1] / 2, 60)
@@ -451,7 +453,9 @@ def _grids(ax: _Axis, state: _State) -> dict[str, list[tuple]]:
     return {
         "sinusoid": [(float(f),) for f in freqs],
         "gauss_markov": [(float(t),) for t in np.geomspace(max(tau[0], tau_min), tau[-1] / 4, 40)],
-        "narrowband": [(float(f),) for f in free if f < 0.8 * nyquist],
+        "narrowband": [
+            (float(f), float(f * w)) for f in free[::2] if f < 0.8 * nyquist for w in LINE_SEEDS
+        ],
         "prefilter": [
             (family, float(length), tau0)
             for family in effects.PREFILTERS
@@ -676,15 +680,13 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
             cand.evidence |= {"p_value_family": cand.p_value, "n_time_domain_tests": n_tests}
         margin = 2 * np.log(ALPHA / cand.p_value)
         trials.append(Trial(cand.kind, cand, float(margin), flags_ok, new_state, lambda h=hold: h))
-    sinusoid_fits: list = []  # the AVAR's line search, reused to seed a narrowband line
     for kind, specs in _grids(ax, state).items():
         name = _column_name(kind, state)
         if name is None or not specs:
             continue
-        if kind == "narrowband":  # specs: the frequencies away from the modelled lines
-            free = set(specs)
-            seeds = [(sp, f) for sp, f in sinusoid_fits if sp in free] or _column_fits(
-                tau, state.avar, edf, ax.tau_min, state.columns, "sinusoid", specs,
+        if kind == "narrowband":  # specs: coarse (centre, width) away from the modelled lines
+            seeds = _column_fits(
+                tau, state.avar, edf, ax.tau_min, state.columns, kind, specs,
                 state.n_nonlinear, fit.cutoff_hz,
             )  # fmt: skip
             spec, fits, fit_new = _narrowband_refine(ax, state, _best(seeds)[0], fit.cutoff_hz)
@@ -701,8 +703,6 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
                 fit.cutoff_hz,
             )
             spec, fit_new = _best(fits)
-            if kind == "sinusoid":
-                sinusoid_fits = fits
         cand = _column_candidate(kind, spec, fit_new, state, ax)
         new_state = _State(
             state.avar,

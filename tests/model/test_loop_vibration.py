@@ -93,7 +93,7 @@ def test_gauss_markov_label_refused_when_a_line_stands_out():
 
 def test_spread_line_is_a_narrowband_vibration_with_its_width():
     rng, y = base(26)
-    f0, q = 0.5, 25.0  # a damped oscillator: line width f0/Q = 0.02 Hz
+    f0, q = 0.05, 25.0  # a damped oscillator: line width f0/Q = 0.002 Hz
     r = np.exp(-np.pi * f0 / q * TAU0)
     x = signal.lfilter([1.0], [1, -2 * r * np.cos(2 * np.pi * f0 * TAU0), r * r],
                        rng.standard_normal(N))  # fmt: skip

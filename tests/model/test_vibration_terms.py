@@ -8,6 +8,8 @@ the aliased PSD), so a wrong sign, factor or parametrisation of the implementati
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from scipy import integrate
@@ -41,7 +43,7 @@ def test_oscillator_avar_matches_psd_integral(f0, width):
         edges = [0, f0 - 5 * width, f0 + 5 * width, 20 * f0 + 50 / t]
         num = sum(
             integrate.quad(integrand, max(lo, 0), hi, limit=2000, epsabs=0, epsrel=1e-8)[0]
-            for lo, hi in zip(edges[:-1], edges[1:], strict=True)
+            for lo, hi in itertools.pairwise(edges)
             if hi > max(lo, 0)
         )
         num += integrate.quad(integrand, edges[-1], np.inf, limit=500)[0]
