@@ -632,6 +632,20 @@ def noise_psd(fit: ieee952.CompositeFit, column_params: dict[str, float]) -> eff
     )
 
 
+def _ramp_whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis) -> effects.Whitener:
+    """The whitener of the ramp test: the fitted PSD with the rate random walk at its 95 %
+    upper profile bound.  A random walk's wander over the record looks like a trend; with K
+    underestimated (unresolved, or soaked into B) the GLS would read that wander as a ramp —
+    measured: false ramps on clean axes of the independent generator, whose axes all carry K."""
+    psd = noise_psd(fit, state.column_params)
+    j = fit.names.index("rate_random_walk")
+    k2_hi = fit.profile_interval(state.avar, ax.edf, j)[1]
+    upper = effects.NoisePsd(
+        psd.white, psd.flicker, psd.cutoff_hz, max(psd.rrw, k2_hi), psd.gauss_markov
+    )
+    return effects.Whitener(upper, len(state.y_d), ax.dt)
+
+
 def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     """Evaluate every candidate against the current state (significance, hold-out, flags).
 
@@ -647,7 +661,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         effects.coupling_candidate("supply", state.y_d, ax.sig.supply_d, dt, "V", whiten),
         effects.step_candidate(state.y_d, dt, whiten),
         effects.warmup_candidate(state.y_d, dt, whiten),
-        effects.ramp_candidate(state.y_d, dt, whiten),
+        effects.ramp_candidate(state.y_d, dt, _ramp_whitener(fit, state, ax)),
         # spikes: one candidate, from the raw series' robust statistics (found once, whole)
         effects.spike_candidate(ax.sig.y, ax.sig.tau0) if state.spikes is None else None,
     ]
@@ -658,7 +672,11 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         fit_new = new_state.fit(ax)
         hold = {"holds": True, "note": "spikes are local; no hold-out split"}
         if cand.regressors is not None:
-            refined = effects.Whitener(noise_psd(fit_new, state.column_params), len(state.y_d), dt)
+            refined = (
+                _ramp_whitener(fit_new, new_state, ax)
+                if cand.kind == "ramp"
+                else effects.Whitener(noise_psd(fit_new, state.column_params), len(state.y_d), dt)
+            )
             cand.refit(refined, state.y_d)
             new_state = _corrected_state(ax, state, cand)
             fit_new = new_state.fit(ax)
