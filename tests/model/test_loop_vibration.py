@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from imupipe.model import effects, loop
 from imupipe.model.loop import AxisSignals, close_loop
 from imupipe.stats.allan import allan_curves
 
@@ -78,17 +79,42 @@ def test_sinusoid_in_the_gauss_markov_range_is_not_labelled_gauss_markov():
     assert lo < 0.01 < hi
 
 
-def test_gauss_markov_label_refused_when_a_line_stands_out():
-    from imupipe.model import loop
+def _decision(kind, evidence):
+    """The loop's verdict on a significant AVAR-column candidate that holds out of sample and
+    clears the flags, with this spectrum-view ``evidence``."""
+    cand = effects.Candidate(kind, {}, {}, {"avar_delta_bic": 50.0} | evidence, column=np.ones(3))
+    return loop._decide(loop.Trial(kind, cand, 40.0, True, None, lambda: {"holds": True}))
 
-    _rng, y = base(25)
-    t = np.arange(N) * TAU0
-    res = run(y + 6 * B_TRUE * np.sin(2 * np.pi * 0.01 * t + 0.4))
-    gm = [c for c in res.rejected if c.kind == "gauss_markov"]
-    competing = gm[0].evidence.get("competing_line") if gm else None
-    if competing:  # significant enough to be asked: the spectrum view decides
-        assert competing["line_p_value"] < loop.ALPHA
-        assert "not a smooth Gauss-Markov" in gm[0].reason
+
+def test_both_views_decide_the_label():
+    line = {"frequency_hz": 0.01, "line_to_floor": 300.0}
+    refused = _decision("gauss_markov", {"competing_line": line | {"line_p_value": 1e-9}})
+    assert not refused.accept
+    assert "0.01 Hz stands 300x above its local floor" in refused.reason
+    assert "not a smooth Gauss-Markov" in refused.reason
+    assert _decision("gauss_markov", {"competing_line": line | {"line_p_value": 0.2}}).accept
+    flat = {"line_to_shoulders": 1.02, "p_value": 0.4}
+    assert "no excess of spectral power" in _decision("narrowband", {"band_excess": flat}).reason
+    peak = {"line_to_shoulders": 40.0, "p_value": 1e-30}
+    assert _decision("narrowband", {"band_excess": peak}).accept
+    white = {"high_to_mid": 1.01, "p_value": 0.7, "band_hz": [40.0, 50.0]}
+    assert "no roll-off towards Nyquist" in _decision("prefilter", {"rolloff": white}).reason
+    lowpass = {"high_to_mid": 0.55, "p_value": 1e-40, "band_hz": [40.0, 50.0]}
+    assert _decision("prefilter", {"rolloff": lowpass}).accept
+
+
+def test_spectrum_views_read_the_data():
+    rng = np.random.default_rng(5)
+    white = rng.standard_normal(2**18)
+    assert effects.psd_rolloff(white, 0.01)["p_value"] > 1e-3
+    lowpassed = signal.lfilter([0.5, 0.5], [1.0], white)  # 2-tap average: |H|² = cos²(πf τ0)
+    roll = effects.psd_rolloff(lowpassed, 0.01)
+    assert roll["p_value"] < 1e-6
+    assert roll["high_to_mid"] < 0.3
+    t = np.arange(2**18) * 0.01
+    tone = white + 0.3 * np.sin(2 * np.pi * 3.0 * t)
+    assert effects.band_excess(tone, 0.01, 3.0, 0.01)["p_value"] < 1e-6
+    assert effects.band_excess(white, 0.01, 3.0, 0.01)["p_value"] > 1e-3
 
 
 def test_spread_line_is_a_narrowband_vibration_with_its_width():
