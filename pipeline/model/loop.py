@@ -53,6 +53,7 @@ DELTA_BIC = 10.0  # AVAR-term candidates
 ALPHA = 1e-3  # family-wise level of each time-domain candidate (Bonferroni over options)
 N_SEGMENTS = 16  # interleaved hold-out segments for time-domain corrections
 MAX_ROUNDS = 6
+RAMP_K_LEVEL = 0.68  # K of the ramp test's whitener: upper end of this profile interval
 N_BOOT = 200
 
 
@@ -633,13 +634,13 @@ def noise_psd(fit: ieee952.CompositeFit, column_params: dict[str, float]) -> eff
 
 
 def _ramp_whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis) -> effects.Whitener:
-    """The whitener of the ramp test: the fitted PSD with the rate random walk at its 95 %
-    upper profile bound.  A random walk's wander over the record looks like a trend; with K
+    """The whitener of the ramp test: the fitted PSD with the rate random walk at the upper
+    end of its :data:`RAMP_K_LEVEL` profile interval.  A random walk's wander over the record looks like a trend; with K
     underestimated (unresolved, or soaked into B) the GLS would read that wander as a ramp —
     measured: false ramps on clean axes of the independent generator, whose axes all carry K."""
     psd = noise_psd(fit, state.column_params)
     j = fit.names.index("rate_random_walk")
-    k2_hi = fit.profile_interval(state.avar, ax.edf, j)[1]
+    k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
     upper = effects.NoisePsd(
         psd.white, psd.flicker, psd.cutoff_hz, max(psd.rrw, k2_hi), psd.gauss_markov
     )
