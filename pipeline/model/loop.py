@@ -635,9 +635,10 @@ def noise_psd(fit: ieee952.CompositeFit, column_params: dict[str, float]) -> eff
 
 def _ramp_whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis) -> effects.Whitener:
     """The whitener of the ramp test: the fitted PSD with the rate random walk at the upper
-    end of its :data:`RAMP_K_LEVEL` profile interval.  A random walk's wander over the record looks like a trend; with K
-    underestimated (unresolved, or soaked into B) the GLS would read that wander as a ramp —
-    measured: false ramps on clean axes of the independent generator, whose axes all carry K."""
+    end of its :data:`RAMP_K_LEVEL` profile interval.  A random walk's wander over the record
+    looks like a trend; with K underestimated (unresolved, or soaked into B) the GLS would read
+    that wander as a ramp — measured: false ramps on clean axes of the independent generator,
+    whose axes all carry K.  At 95 % the bound hid a 12 B ramp (which inflates K's bound)."""
     psd = noise_psd(fit, state.column_params)
     j = fit.names.index("rate_random_walk")
     k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
