@@ -42,10 +42,10 @@ import independent_generator as gen
 EXPECTED = {
     "temperature": {"temperature"},
     "sinusoid": {"sinusoid"},
-    "narrowband": {"narrowband"},  # no such loop kind yet: never right (issue 13 item 3)
+    "narrowband": {"narrowband"},
     "gauss_markov": {"gauss_markov"},
     "bias_step": {"bias_step"},
-    "ramp": {"rate_ramp", "R term"},
+    "ramp": {"ramp", "rate_ramp", "R term"},
     "warmup": {"rate_ramp"},
     "event": {"event"},  # a disturbance event found jointly on the axes (report.json events)
     "tilt": {"event"},

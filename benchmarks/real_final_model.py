@@ -89,6 +89,7 @@ def main() -> None:
                 f"{plateau if plateau is not None else float('nan'):.3g} <= lowest 95 % bound "
                 f"{lowest:.3g}: {plateau is None or plateau <= lowest}; unresolved asymptote / "
                 f"bound max {worst:.3f}; error {loop.before.error:.3g} -> {loop.after.error:.3g}"
+                f" (bootstrap p {loop.before.p_value:.3g} -> {loop.after.p_value:.3g})"
                 f"; effects {[e.kind for e in loop.accepted]}"
             )
             print(f"    fit: {final.fit_note}")

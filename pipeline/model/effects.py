@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 import scipy.fft
-from scipy import special
+from scipy import signal, special
 
 from imupipe.stats import robust
 from imupipe.stats.allan import NO_CORRECTION, SparseCorrection
@@ -66,6 +66,91 @@ def gauss_markov_avar(tau: np.ndarray, tc: float) -> np.ndarray:
     """AVAR of a unit-variance first-order Gauss–Markov process with correlation time ``tc`` (s)."""
     a = tau / tc
     return 2 * tc / tau * (1 - (3 - 4 * np.exp(-a) + np.exp(-2 * a)) / (2 * a))
+
+
+def oscillator_avar(tau: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
+    """AVAR of a unit-variance second-order Gauss–Markov process (a damped oscillator driven by
+    white noise: a spread spectral line) at ``tau`` (s).
+
+    Autocovariance R(t) = e^{−a|t|} (cos ωd t + (a/ωd) sin ωd|t|), ωd = 2π ``f0`` (Hz), damping
+    a = π ``width_hz`` (the line's full width at half power, Hz); its two-sided PSD is
+    S(f) = 4aω0² / ((ω0² − ω²)² + 4a²ω²) at ω = 2πf (ω0² = ωd² + a²), the resonance of
+    x'' + 2a x' + ω0² x = w
+    (Papoulis, *Probability, Random Variables and Stochastic Processes*, §10; Maybeck, *Stochastic
+    Models* vol. 1, §4.10).  For a stationary rate with autocovariance R, averaging over τ and
+    differencing gives (Allan 1966; equal to 4∫ S(f) sin⁴(πfτ)/(πfτ)² df of IEEE Std 952-1997
+    Annex C)
+
+        σ²(τ) = (4 Φ(τ) − Φ(2τ)) / τ²,   Φ(τ) = ∫₀^τ (τ − t) R(t) dt,
+
+    and with R(t) = Re[c e^{−st}], s = a − iωd, c = 1 − i a/ωd, in closed form
+    Φ(τ) = Re[c (τ/s − (1 − e^{−sτ})/s²)].  ``width_hz`` → 0 gives a random-phase sinusoid of
+    variance 1 (:func:`sinusoid_avar` × 2).
+    """
+    tau = np.asarray(tau, dtype=float)
+    a, wd = np.pi * width_hz, 2 * np.pi * f0
+    s = complex(a, -wd)
+    c = complex(1.0, -a / wd)
+
+    def phi(t: np.ndarray) -> np.ndarray:
+        return np.real(c * (t / s + np.expm1(-s * t) / s**2))
+
+    return (4 * phi(tau) - phi(2 * tau)) / tau**2
+
+
+PREFILTERS = ("moving_average", "bartlett", "first_order")
+"""Families of the sensor's prefilter (:func:`prefilter_avar`)."""
+
+
+def _prefilter_autocovariance(kind: str, t: np.ndarray, length_s: float) -> np.ndarray:
+    """Autocovariance r(t) = (h ⋆ h)(t) of unit two-sided-PSD white noise through the
+    ``kind`` prefilter (Wiener–Khinchin: the inverse Fourier transform of |H(f)|²), ∫ r dt = 1.
+
+    * moving average over ``length_s`` = L: |H|² = sinc²(fL), r = (1 − |t|/L)₊ / L;
+    * bartlett: two cascaded moving averages over L (the ADIS SENS_AVG filter), |H|² = sinc⁴(fL),
+      r = B₃(t/L)/L with B₃ the centred cubic B-spline (support ±2L);
+    * first_order low-pass of time constant L (bandwidth 1/(2πL)), |H|² = 1/(1 + (2πfL)²),
+      r = e^{−|t|/L} / (2L).
+    """
+    x = np.abs(t) / length_s
+    if kind == "moving_average":
+        r = np.maximum(1 - x, 0.0)
+    elif kind == "bartlett":
+        r = np.where(x <= 1, 2 / 3 - x**2 + x**3 / 2, np.maximum(2 - x, 0.0) ** 3 / 6)
+    elif kind == "first_order":
+        r = np.exp(-x) / 2
+    else:
+        raise ValueError(f"unknown prefilter {kind!r}; one of {', '.join(PREFILTERS)}")
+    return r / length_s
+
+
+def prefilter_avar(tau: np.ndarray, tau0: float, kind: str, length_s: float) -> np.ndarray:
+    """AVAR per unit N² (two-sided white PSD, u²/Hz) of white noise through the sensor's
+    prefilter, sampled every ``tau0`` (s), at ``tau`` = m τ0: the random-walk column N²/τ of
+    IEEE 952 with the prefilter's short-τ shape.
+
+    The samples have autocovariance r_k = r(k τ0) (:func:`_prefilter_autocovariance`, aliasing
+    included), scaled so that τ0 Σ_k r_k = 1: N² is the series' long-run PSD level, the N the
+    model reports.  The mean of m samples has variance V(m) = (m r₀ + 2 Σ_{k<m} (m − k) r_k)/m²,
+    and σ²(mτ0) = 2 V(m) − 2 V(2m) (two adjacent means: σ² = Var − Cov, Var(mean of 2m) =
+    (Var + Cov)/2); → 1/τ for m τ0 ≫ L, below it less (the filter's correlation) — exact for
+    every m (IEEE Std 1139 / Allan 1966, cf. :mod:`imupipe.model.ieee952` module doc).
+    """
+    tau = np.asarray(tau, dtype=float)
+    m = np.maximum(np.round(tau / tau0).astype(np.int64), 1)
+    support = {"moving_average": 1.0, "bartlett": 2.0, "first_order": 40.0}[kind] * length_s
+    lags = np.arange(int(min(np.ceil(support / tau0), 2 * m.max())) + 1)
+    r = _prefilter_autocovariance(kind, lags * tau0, length_s)
+    r = r / (tau0 * (r[0] + 2 * r[1:].sum()))
+    k = lags[1:]
+    s0 = np.concatenate([[0.0], np.cumsum(r[1:])])  # Σ_{1≤k≤n} r_k
+    s1 = np.concatenate([[0.0], np.cumsum(k * r[1:])])  # Σ_{1≤k≤n} k r_k
+
+    def var_mean(mm: np.ndarray) -> np.ndarray:
+        n = np.minimum(mm - 1, len(lags) - 1)
+        return (mm * r[0] + 2 * (mm * s0[n] - s1[n])) / mm**2
+
+    return 2 * var_mean(m) - 2 * var_mean(2 * m)
 
 
 @dataclass(frozen=True)
@@ -219,6 +304,11 @@ class Candidate:
     n_options: int = 1
     p_value: float = 1.0
     options: list[tuple[dict[str, np.ndarray], dict[str, float]]] = field(default_factory=list)
+    drift_nuisance: bool = True  # a linear rate ramp is a nuisance (False: it is the effect)
+
+    def _drift(self, whiten: Whitener) -> np.ndarray:
+        """The nuisance columns of the GLS: the whitened ramp, or none (m, 0)."""
+        return whiten.drift if self.drift_nuisance else np.zeros((len(whiten.drift), 0))
 
     def refit(self, whiten: Whitener, y_d: np.ndarray) -> None:
         """Re-estimate coefficients, intervals, correction and p-value with ``whiten``.
@@ -230,7 +320,7 @@ class Candidate:
         yw = whiten(y_d)
         if self.options:
             fits = [
-                spectral_fit(yw, whiten(np.column_stack(list(regs.values()))), whiten.drift)
+                spectral_fit(yw, whiten(np.column_stack(list(regs.values()))), self._drift(whiten))
                 for regs, _ in self.options
             ]
             best = int(np.argmin([f.p_value() for f in fits]))
@@ -241,7 +331,7 @@ class Candidate:
             fit = fits[best]
         else:
             assert self.regressors is not None
-            fit = spectral_fit(yw, whiten(self.regressors), whiten.drift)
+            fit = spectral_fit(yw, whiten(self.regressors), self._drift(whiten))
         for j, name in enumerate(self.names):
             self.params[name] = float(fit.beta[j])
             self.intervals[name] = fit.interval(j)
@@ -270,12 +360,14 @@ class Candidate:
         n = len(yw)
         even = (np.arange(n) * segments // n) % 2 == 0
         ratios = []
+        drift = self._drift(whiten)
         for train in (even, ~even):
-            beta = spectral_fit(yw, xw, whiten.drift, train).beta
+            beta = spectral_fit(yw, xw, drift, train).beta
             test = ~train
-            base = yw[test] - whiten.drift[test] * _slope(yw[test], whiten.drift[test])
-            e = yw[test] - xw[test] @ beta
-            e = e - whiten.drift[test] * _slope(e, whiten.drift[test])
+            base, e = yw[test], yw[test] - xw[test] @ beta
+            if self.drift_nuisance:
+                base = base - drift[test] * _slope(base, drift[test])
+                e = e - drift[test] * _slope(e, drift[test])
             ratios.append(float(e @ e / (base @ base)))
         return {"holds": bool(max(ratios) < 1.0), "power_ratio_heldout": ratios}
 
@@ -412,6 +504,30 @@ def warmup_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
     ]
     cand = _best_option("rate_ramp", y_d, whiten, options)
     cand.evidence["note"] = "linear drift: the model's rate_ramp term R"
+    return cand
+
+
+def ramp_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
+    """Linear rate ramp R·t over the whole record (kind ``ramp``), tested in the time domain.
+
+    The whitened first difference of a ramp is the whitener's constant column, so this is the
+    GLS test of a non-zero mean of the differences under the fitted noise PSD (flicker and rate
+    random walk included: a random walk's differences have zero mean, its wander is in the
+    covariance) — the one candidate fitted without the drift nuisance.  Every block mean counts,
+    where the Allan fit sees the ramp only through its few longest τ (R²τ²/2).  ``slope_per_s``
+    in rate units per second; one option, no Bonferroni factor.
+    """
+    t = np.arange(len(y_d)) * dt
+    cand = Candidate(
+        "ramp",
+        {},
+        {},
+        regressors=(t - t.mean())[:, None],
+        names=("slope_per_s",),
+        drift_nuisance=False,
+    )
+    cand.refit(whiten, y_d)
+    cand.evidence["note"] = "a linear drift of the rate: the IEEE 952 rate_ramp R = |slope|"
     return cand
 
 
@@ -591,4 +707,67 @@ def psd_line(
         "line_to_floor": float(ratio),
         "line_p_value": float(line_p),
         "psd_samples": n,
+    }
+
+
+ROLLOFF_BANDS = ((0.05, 0.2), (0.4, 0.5))
+"""Mid and near-Nyquist bands (fractions of the sample rate) of :func:`psd_rolloff`."""
+ROLLOFF_SEGMENT = 256
+
+
+def psd_rolloff(y: np.ndarray, tau0: float) -> dict[str, float]:
+    """The spectrum's view of a prefilter: the mean Welch PSD (Hann, :data:`ROLLOFF_SEGMENT`
+    samples, 50 % overlap; Welch 1967) of the near-Nyquist band over that of the mid band
+    (:data:`ROLLOFF_BANDS`), over the first :data:`PSD_MAX_SAMPLES` samples at most.
+
+    White noise gives 1, a rate quantisation or angle white noise more, a low-pass less.  Each
+    band mean averages K segments × b bins of ~χ²₂ periodogram ordinates, so ln(ratio) has
+    standard error ≈ √(1/(K b_mid) + 1/(K b_high)) (conservative for the overlap's correlation
+    ignored only to first order); ``p_value``: one-sided normal P(no roll-off).
+    """
+    n = min(len(y), PSD_MAX_SAMPLES)
+    f, pxx = signal.welch(
+        np.asarray(y[:n], dtype=float), fs=1.0 / tau0, nperseg=min(ROLLOFF_SEGMENT, n)
+    )
+    fs = 1.0 / tau0
+    (m_lo, m_hi), (h_lo, h_hi) = ROLLOFF_BANDS
+    mid = (f >= m_lo * fs) & (f <= m_hi * fs)
+    high = (f >= h_lo * fs) & (f < h_hi * fs)
+    segments = max(1, 2 * n // ROLLOFF_SEGMENT - 1)
+    ratio = float(pxx[high].mean() / pxx[mid].mean())
+    se = float(np.sqrt(1 / (segments * mid.sum()) + 1 / (segments * high.sum())))
+    return {
+        "high_to_mid": ratio,
+        "p_value": float(special.ndtr(np.log(ratio) / se)),
+        "band_hz": [h_lo * fs, h_hi * fs],
+    }
+
+
+def band_excess(y: np.ndarray, tau0: float, f0: float, width_hz: float) -> dict[str, float]:
+    """The spectrum's view of a spread line at ``f0`` ± ``width_hz`` (Hz): the mean Welch PSD
+    (Hann, 50 % overlap; Welch 1967) within |f − f0| ≤ w over that of its shoulders
+    2w ≤ |f − f0| ≤ 4w, w = max(``width_hz``, 1.5 bins).
+
+    Segments of ≈ 2/w samples·s (a power of two, at least 64, at most an eighth of the first
+    :data:`PSD_MAX_SAMPLES` samples) resolve the line without splitting it over many noisy
+    bins.  ln(ratio) has standard error ≈ √(1/(K b_line) + 1/(K b_shoulder)) (K segments, b
+    bins, ~χ²₂ each); ``p_value``: one-sided normal P(no excess).  A smooth spectrum (white,
+    flicker, a Gauss–Markov slope) gives a ratio near 1 — only a line or a resonance stands out.
+    """
+    n = min(len(y), PSD_MAX_SAMPLES)
+    seg = int(np.clip(2 ** np.round(np.log2(2.0 / (width_hz * tau0))), 64, max(64, n // 8)))
+    seg = min(seg, n)
+    f, pxx = signal.welch(np.asarray(y[:n], dtype=float), fs=1.0 / tau0, nperseg=seg)
+    w = max(width_hz, 1.5 / (seg * tau0))
+    dist = np.abs(f - f0)
+    line, shoulder = dist <= w, (dist >= 2 * w) & (dist <= 4 * w) & (f > 0)
+    if not line.any() or not shoulder.any():
+        return {}
+    segments = max(1, 2 * n // seg - 1)
+    ratio = float(pxx[line].mean() / pxx[shoulder].mean())
+    se = float(np.sqrt(1 / (segments * line.sum()) + 1 / (segments * shoulder.sum())))
+    return {
+        "line_to_shoulders": ratio,
+        "p_value": float(special.ndtr(-np.log(ratio) / se)),
+        "resolution_hz": 1.0 / (seg * tau0),
     }

@@ -39,13 +39,19 @@ import functools
 import itertools
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Literal
 
 import numba
 import numpy as np
 from scipy import optimize, special
 
-from imupipe.model.effects import gauss_markov_avar, sinusoid_avar
+from imupipe.model.effects import (
+    gauss_markov_avar,
+    oscillator_avar,
+    prefilter_avar,
+    sinusoid_avar,
+)
 from imupipe.vocab import TERM_NAMES, TERM_UNITS, chi2_ppf_1dof
 
 if TYPE_CHECKING:
@@ -392,7 +398,7 @@ class CompositeFit:
 
         best = float(self.coef[j])
         lo = 0.0
-        if excess(0.0) > 0:
+        if best > 0 and excess(0.0) > 0:  # a coefficient at its bound 0 has lo = 0
             lo = optimize.brentq(excess, 0.0, best, xtol=1e-6 * best, rtol=1e-6)
         # upper end: double from the fit (or from a tiny fraction of the data's level) until
         # the deviance rises past the limit
@@ -588,17 +594,41 @@ class NoiseTerm:
     reason: str | None
 
 
-_EFFECT_SHAPES: dict[str, Callable[[np.ndarray, float], np.ndarray]] = {
-    "sinusoid": sinusoid_avar,
-    "gauss_markov": gauss_markov_avar,
-}
+def effect_shape(kind: str, shape: tuple) -> np.ndarray | Callable[[np.ndarray], np.ndarray]:
+    """The AVAR column (per unit squared ``value``) of an effect of ``kind`` with ``shape``
+    parameters, as a function of τ (s) (:mod:`imupipe.model.effects`):
+
+    * sinusoid (frequency Hz,): amplitude² · :func:`effects.sinusoid_avar`;
+    * gauss_markov (Tc s,): σ² · :func:`effects.gauss_markov_avar`;
+    * narrowband (centre Hz, line width Hz): σ² · :func:`effects.oscillator_avar`;
+    * prefilter (filter family, length s, τ0 s): N_f² · (:func:`effects.prefilter_avar` − 1/τ),
+      the part of the white noise N² that passed the sensor's prefilter loses its short-τ
+      variance (≤ 0; the IEEE 952 N² keeps the whole white level).
+    """
+    if kind == "sinusoid":
+        return partial(sinusoid_avar, f0=shape[0])
+    if kind == "gauss_markov":
+        return partial(gauss_markov_avar, tc=shape[0])
+    if kind == "narrowband":
+        return partial(oscillator_avar, f0=shape[0], width_hz=shape[1])
+    if kind == "prefilter":
+        family, length_s, tau0 = shape
+
+        def deficit(tau: np.ndarray) -> np.ndarray:
+            return prefilter_avar(tau, tau0, family, length_s) - 1.0 / tau
+
+        return deficit
+    raise ValueError(f"no AVAR shape for effect kind {kind!r}")
 
 
 @dataclass(frozen=True)
 class EffectTerm:
-    """An AVAR effect the closed loop added to the model: a sinusoid (``parameter`` its
-    frequency, Hz; ``value`` its amplitude) or a Gauss–Markov process (``parameter`` its
-    correlation time Tc, s; ``value`` its σ), with the 95 % profile interval, in ``unit``."""
+    """An AVAR effect the closed loop added to the model, with the 95 % profile interval of
+    ``value`` in ``unit``: a sinusoid (``value`` its amplitude, ``parameter`` its frequency, Hz),
+    a Gauss–Markov process (σ; correlation time Tc, s), a narrowband vibration (σ, its rms;
+    centre frequency, Hz, and ``width_hz``), or the sensor's prefilter (N_f, the filtered part
+    of the white noise; filter length, s, of the family ``filter``).  ``label``: its key in
+    report.json ``model.terms`` (the kind, numbered when a kind occurs more than once)."""
 
     kind: str
     value: float
@@ -606,16 +636,28 @@ class EffectTerm:
     hi: float
     unit: str
     parameter: float
+    width_hz: float = 0.0
+    filter: str = ""
+    tau0_s: float = 0.0
+    label: str = ""
 
     def avar(self, tau: np.ndarray) -> np.ndarray:
-        """Its Allan variance (u²) at ``tau`` (s) (:mod:`imupipe.model.effects` shapes)."""
-        return self.value**2 * _EFFECT_SHAPES[self.kind](
-            np.asarray(tau, dtype=float), self.parameter
-        )
+        """Its Allan variance (u²) at ``tau`` (s) (:func:`effect_shape`)."""
+        shape = {
+            "narrowband": (self.parameter, self.width_hz),
+            "prefilter": (self.filter, self.parameter, self.tau0_s),
+        }.get(self.kind, (self.parameter,))
+        return self.value**2 * effect_shape(self.kind, shape)(np.asarray(tau, dtype=float))
 
     def as_model_term(self) -> dict:
-        """The report.json ``model.terms`` entry: value, lo, hi, unit."""
-        return {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit}
+        """The report.json ``model.terms`` entry: value, lo, hi, unit (and the shape: centre
+        and width of a narrowband line, family and length of a prefilter)."""
+        out = {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit}
+        if self.kind == "narrowband":
+            out |= {"frequency_hz": self.parameter, "width_hz": self.width_hz}
+        if self.kind == "prefilter":
+            out |= {"filter": self.filter, "length_s": self.parameter}
+        return out
 
 
 @dataclass(frozen=True)
@@ -684,7 +726,7 @@ def terms_from_fit(
     sensor: Literal["gyro", "accel"],
     note: str = "",
     avar_hi: np.ndarray | None = None,
-    effect_parameters: dict[str, float] | None = None,
+    effect_parameters: dict[str, tuple[str, tuple]] | None = None,
 ) -> NoiseTerms:
     """Convert the squared coefficients of ``fit`` to IEEE 952 terms with profile intervals.
 
@@ -693,7 +735,8 @@ def terms_from_fit(
     :func:`fit_start`) is prepended to ``fit_note``.  ``avar_hi``: the measured AVAR's upper
     confidence bound at every τ; an upper bound (of an unresolved term, or of an interval) is
     then never one whose asymptote lies above it (:func:`asymptote_caps`).  Extra columns of
-    ``fit`` become :class:`EffectTerm` s with the shape parameter ``effect_parameters[name]``.
+    ``fit`` become :class:`EffectTerm` s: ``effect_parameters[name]`` = (kind, shape parameters
+    of :func:`effect_shape`).
     """
     tau_lo, tau_hi = fit.tau_range
     misfit = _adequacy(fit)
@@ -740,11 +783,18 @@ def terms_from_fit(
                 reason += f"; {misfit}"
             terms[name] = NoiseTerm(None, None, float(np.sqrt(hi)), unit, reason)
     effects = []
-    for name, parameter in (effect_parameters or {}).items():
+    for name, (kind, shape) in (effect_parameters or {}).items():
         j = fit.names.index(name)
         lo, hi = fit.profile_interval(avar, edf, j)
         value, lo, hi = (float(np.sqrt(c)) for c in (fit.coef[j], lo, hi))
-        effects.append(EffectTerm(name, value, lo, hi, TERM_UNITS[sensor][2], parameter))
+        unit = TERM_UNITS[sensor][1 if kind == "prefilter" else 2]
+        if kind == "prefilter":
+            family, length_s, tau0 = shape
+            term = EffectTerm(kind, value, lo, hi, unit, length_s, 0.0, family, tau0, name)
+        else:
+            width = shape[1] if kind == "narrowband" else 0.0
+            term = EffectTerm(kind, value, lo, hi, unit, shape[0], width, label=name)
+        effects.append(term)
     fit_note = "; ".join(t for t in (note, misfit or "model adequate on the fitted range") if t)
     return NoiseTerms(
         **terms,

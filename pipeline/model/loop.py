@@ -53,7 +53,8 @@ from imupipe.vocab import CHI2_95
 DELTA_BIC = 10.0  # AVAR-term candidates
 ALPHA = 1e-3  # family-wise level of each time-domain candidate (Bonferroni over options)
 N_SEGMENTS = 16  # interleaved hold-out segments for time-domain corrections
-MAX_ROUNDS = 4
+MAX_ROUNDS = 6
+RAMP_K_LEVEL = 0.68  # K of the ramp test's whitener: upper end of this profile interval
 N_BOOT = 200
 
 
@@ -194,9 +195,10 @@ class _State:
     spikes: SparseCorrection | None  # removed from the full-rate series (AxisSignals.y)
     columns: dict[str, np.ndarray] = field(default_factory=dict)
     n_nonlinear: int = 0
-    column_params: dict[str, float] = field(default_factory=dict)  # Tc or f0 of each column
+    column_params: dict[str, float] = field(default_factory=dict)  # first shape parameter
     avar_d: np.ndarray | None = None  # AVAR of y_d at the decimated factors (cache)
-    effect_parameters: dict[str, float] = field(default_factory=dict)  # shape of each column
+    # (kind, shape parameters of ieee952.effect_shape) of each column
+    effect_parameters: dict[str, tuple[str, tuple]] = field(default_factory=dict)
 
     def fit(self, ax: _Axis, possible_b: bool = False) -> ieee952.CompositeFit:
         """The composite fit of this state; ``possible_b``: with B held to a plateau under
@@ -381,68 +383,201 @@ class _Axis:
         return out
 
 
-def _column_fits(tau, avar, edf, tau_min, columns, shape, grid, n_nonlinear, cutoff_hz=None):
-    """(parameter, fit) of an extra AVAR column at every parameter of ``grid``, with the flicker
-    cut-off of the fit without it (``cutoff_hz`` when that fit is already known)."""
+N_SHAPE = {"sinusoid": 1, "gauss_markov": 1, "narrowband": 2, "prefilter": 2}
+"""Nonlinear shape parameters of each AVAR-column kind (frequency; Tc; centre and width;
+filter family and length)."""
+MAX_LINES = 3  # narrowband lines per axis (a fundamental and its harmonics)
+LINE_SEEDS = (0.005, 0.04, 0.3)  # relative widths of the coarse line search
+LINE_WIDTHS = 14  # line widths profiled at the spectrum's centre
+LINE_CENTRES = 9  # centres profiled around it
+PROFILE_SHAPES = 12  # shapes whose value intervals make up a profile interval
+
+
+def _shape(kind: str) -> Callable[[np.ndarray, tuple], np.ndarray]:
+    """Column function (τ, shape parameters) → AVAR per unit squared value
+    (:func:`ieee952.effect_shape`)."""
+    return lambda tau, spec: ieee952.effect_shape(kind, spec)(tau)
+
+
+def _column_name(kind: str, state: _State) -> str | None:
+    """The state's column name of a new ``kind`` effect (narrowband lines are numbered, up to
+    :data:`MAX_LINES`), ``None`` when the kind is already modelled."""
+    if kind != "narrowband":
+        return None if kind in state.columns else kind
+    lines = [n for n, (k, _) in state.effect_parameters.items() if k == "narrowband"]
+    if len(lines) >= MAX_LINES:
+        return None
+    return "narrowband" if not lines else f"narrowband_{len(lines) + 1}"
+
+
+def _column_fits(tau, avar, edf, tau_min, columns, kind, specs, n_nonlinear, cutoff_hz=None):
+    """(shape parameters, fit) of an extra ``kind`` AVAR column at every spec of ``specs``,
+    with the flicker cut-off of the fit without it (``cutoff_hz`` when that fit is known)."""
     if cutoff_hz is None:
         cutoff_hz = _fit(tau, avar, edf, tau_min, columns, None, n_nonlinear).cutoff_hz
+    shape = _shape(kind)
     return [
         (
-            float(p),
+            spec,
             _fit(
                 tau,
                 avar,
                 edf,
                 tau_min,
-                columns | {"_new": shape(tau, p)},
+                columns | {"_new": shape(tau, spec)},
                 cutoff_hz,
-                n_nonlinear + 1,
+                n_nonlinear + N_SHAPE[kind],
             ),
         )
-        for p in grid
+        for spec in specs
     ]
 
 
-def _best(fits: list[tuple[float, ieee952.CompositeFit]]) -> tuple[float, ieee952.CompositeFit]:
-    """The (parameter, fit) of least deviance."""
+def _best(fits: list[tuple[tuple, ieee952.CompositeFit]]) -> tuple[tuple, ieee952.CompositeFit]:
+    """The (shape parameters, fit) of least deviance."""
     return min(fits, key=lambda pf: pf[1].deviance)
 
 
-def _gauss_markov_profile(
-    fits: list[tuple[float, ieee952.CompositeFit]], avar: np.ndarray, edf: np.ndarray
+def _column_profile(
+    kind: str, fits: list[tuple[tuple, ieee952.CompositeFit]], avar: np.ndarray, edf: np.ndarray
 ) -> dict[str, list[float]]:
-    """95 % profile intervals of the Gauss–Markov σ and Tc over the Tc grid.
+    """95 % profile intervals of an AVAR column's value and of its numeric shape parameters
+    over the searched ``fits`` (sinusoid: amplitude only, its frequency is the periodogram's).
 
-    Profile deviance of σ²: min over Tc of D(σ², Tc); the interval is {σ² : profile − D_min ≤
-    φ χ²₁(0.95)} (φ: dispersion of the best fit), i.e. the union over the Tc with
-    ΔD(Tc) = D(Tc) − D_min ≤ φ χ²₁(0.95) of each one's σ² interval at the remaining room
-    φ χ²₁(0.95) − ΔD(Tc) — not conditional on the best Tc, which the σ estimate is strongly
-    correlated with.  Tc interval: where ΔD(Tc)/φ crosses χ²₁(0.95)
+    Profile deviance of the squared value: min over the shape of D; the interval is {value :
+    profile − D_min ≤ φ χ²₁(0.95)} (φ: dispersion of the best fit), i.e. the union over the
+    shapes with ΔD = D − D_min ≤ φ χ²₁(0.95) of each one's interval at the remaining room
+    φ χ²₁(0.95) − ΔD (the :data:`PROFILE_SHAPES` shapes of most room) — not conditional on the
+    best shape, which the value is strongly correlated with.  A shape parameter's interval:
+    where its own profile (min of ΔD/φ over the others) crosses χ²₁(0.95)
     (:func:`effects.grid_interval`).
     """
-    grid = np.array([p for p, _ in fits])
     dev = np.array([f.deviance for _, f in fits])
     phi = _best(fits)[1].dispersion
     room = CHI2_95 - (dev - dev.min()) / phi
     bounds = []
-    for j in np.flatnonzero(room >= 0):
+    inside = np.flatnonzero(room >= 0)
+    for j in inside[np.argsort(-room[inside])][:PROFILE_SHAPES]:
         fit = fits[j][1]
         level = float(special.gammainc(0.5, room[j] * phi / fit.dispersion / 2))  # chi2.cdf
         bounds.append(fit.profile_interval(avar, edf, fit.names.index("_new"), max(level, 1e-9)))
     lo, hi = np.sqrt(np.min(bounds)), np.sqrt(np.max(bounds))
-    return {"sigma": [float(lo), float(hi)], "tau_c_s": effects.grid_interval(grid, room)}
+    value = {"gauss_markov": "sigma", "narrowband": "rms", "sinusoid": "amplitude"}
+    out = {value.get(kind, "white_filtered"): [float(lo), float(hi)]}
+    names = {"gauss_markov": ("tau_c_s",), "narrowband": ("frequency_hz", "width_hz")}
+    if kind == "prefilter":
+        names = {"prefilter": ("", "length_s")}
+    for i, name in enumerate(names.get(kind, ())):
+        if not name:
+            continue
+        values = np.array([spec[i] for spec, _ in fits])
+        grid = np.unique(values)
+        best_room = np.array([room[values == v].max() for v in grid])
+        if grid.size > 1:
+            out[name] = effects.grid_interval(grid, best_room)
+    return out
 
 
-def _grids(tau: np.ndarray, tau_min: float) -> dict[str, np.ndarray]:
-    """Sinusoid frequencies (Hz) and Gauss–Markov Tc (s) whose AVAR peak (0.371/f0, 1.89 Tc)
-    lies in the fitted τ range."""
+def _grids(ax: _Axis, state: _State) -> dict[str, list[tuple]]:
+    """Shape parameters searched per kind: sinusoid frequencies (Hz) and Gauss–Markov Tc (s)
+    whose AVAR peak (0.371/f0, 1.89 Tc) lies in the fitted τ range; for a narrowband line every
+    second of those frequencies away from the lines already modelled × :data:`LINE_SEEDS`
+    relative widths (a coarse search, refined on the spectrum and in width by
+    :func:`_narrowband_refine`); prefilters of each
+    family (:data:`effects.PREFILTERS`) from a quarter sample to 20 samples long."""
+    tau, tau_min, tau0 = ax.tau, ax.tau_min, ax.sig.tau0
+    freqs = 0.371 / np.geomspace(max(tau[0], tau_min), tau[-1] / 2, 60)
+    lines = [s[0] for k, s in state.effect_parameters.values() if k == "narrowband"]
+    free = [f for f in freqs if all(abs(f / c - 1) > 0.1 for c in lines)]
+    nyquist = 0.5 / tau0
     return {
-        "sinusoid": 0.371 / np.geomspace(max(tau[0], tau_min), tau[-1] / 2, 60),
-        "gauss_markov": np.geomspace(max(tau[0], tau_min), tau[-1] / 4, 40),
+        "sinusoid": [(float(f),) for f in freqs],
+        "gauss_markov": [(float(t),) for t in np.geomspace(max(tau[0], tau_min), tau[-1] / 4, 40)],
+        "narrowband": [
+            (float(f), float(f * w)) for f in free[::2] if f < 0.8 * nyquist for w in LINE_SEEDS
+        ],
+        "prefilter": [
+            (family, float(length), tau0)
+            for family in effects.PREFILTERS
+            for length in np.geomspace(0.25 * tau0, 20 * tau0, 16)
+        ],
     }
 
 
-_SHAPES = {"sinusoid": effects.sinusoid_avar, "gauss_markov": effects.gauss_markov_avar}
+def _narrowband_refine(
+    ax: _Axis, state: _State, spec: tuple, cutoff_hz: float
+) -> tuple[tuple, list[tuple[tuple, ieee952.CompositeFit]], ieee952.CompositeFit]:
+    """Both views of a narrowband line: its centre from the periodogram (the strongest line
+    within a factor 1.6 of the AVAR search's best frequency, :func:`effects.psd_line`), then the
+    AVAR profile over :data:`LINE_WIDTHS` widths (one frequency bin … half the centre) ×
+    :data:`LINE_CENTRES` centres (± two widths) around it.  Returns (best spec, the fits, best
+    fit)."""
+    f = spec[0]
+    line = _line(ax, state, f / 1.6, f * 1.6)
+    peak = line.get("frequency_hz", f)
+    duration = len(ax.sig.y) * ax.sig.tau0
+    widths = np.geomspace(1.0 / duration, 0.5 * peak, LINE_WIDTHS)
+    specs = [
+        (float(c), float(w))
+        for w in widths
+        for c in np.unique([peak, *(peak + w * np.linspace(-2, 2, LINE_CENTRES))])
+        if c > 0
+    ]
+    fits = _column_fits(
+        ax.tau,
+        state.avar,
+        ax.edf,
+        ax.tau_min,
+        state.columns,
+        "narrowband",
+        specs,
+        state.n_nonlinear,
+        cutoff_hz,
+    )
+    best, fit = _best(fits)
+    return best, fits, fit
+
+
+def _line(ax: _Axis, state: _State, f_lo: float, f_hi: float) -> dict:
+    """:func:`effects.psd_line` in [f_lo, f_hi] Hz: on the full-rate (spike-corrected) series
+    when the band lies above a fifth of the block rate, else on the block means."""
+    if f_hi > 0.2 / ax.dt:
+        return effects.psd_line(ax.sig.y, ax.sig.tau0, f_lo, f_hi, state.spikes)
+    return effects.psd_line(state.y_d, ax.dt, f_lo, f_hi)
+
+
+def _spectrum_view(ax: _Axis, state: _State, cand: effects.Candidate) -> dict:
+    """The spectrum's view of a significant AVAR-column candidate (evidence, judged by
+    :func:`_decide`): a Gauss–Markov hump is smooth, so the strongest periodogram line around the
+    frequency whose sinusoid peaks at the same τ (0.371 / 1.89 Tc ≈ 0.196/Tc, a factor 3 either
+    side) must not stand out of its local floor (``competing_line``); a narrowband line must
+    stand above its shoulders (:func:`effects.band_excess`); a prefilter must show as a roll-off
+    of the spectrum towards Nyquist (:func:`effects.psd_rolloff`)."""
+    if cand.kind == "gauss_markov":
+        f = 0.196 / cand.params["tau_c_s"]
+        return {"competing_line": _local_line(ax, state, f / 3, f * 3)}
+    if cand.kind == "prefilter":
+        return {"rolloff": effects.psd_rolloff(ax.sig.y, ax.sig.tau0)}
+    if cand.kind == "narrowband":
+        f, w = cand.evidence["shape"]
+        return {"band_excess": effects.band_excess(ax.sig.y, ax.sig.tau0, f, w)}
+    return {}
+
+
+def _local_line(ax: _Axis, state: _State, f_lo: float, f_hi: float) -> dict:
+    """The strongest periodogram line in [f_lo, f_hi] against its LOCAL floor (the median of
+    the bins within ±10 % of it, so a sloped smooth spectrum is no line), its p-value
+    Bonferroni-adjusted for the wide band's bins."""
+    wide = _line(ax, state, f_lo, f_hi)
+    if not wide:
+        return {}
+    f = wide["frequency_hz"]
+    local = _line(ax, state, f / 1.1, f * 1.1)
+    if not local:
+        return {}
+    bins = (f_hi - f_lo) / (f * (1.1 - 1 / 1.1))  # wide band / local band, in bins
+    p = min(1.0, local["line_p_value"] * max(bins, 1.0))
+    return {"frequency_hz": f, "line_to_floor": local["line_to_floor"], "line_p_value": p}
 
 
 def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
@@ -561,6 +696,21 @@ def noise_psd(fit: ieee952.CompositeFit, column_params: dict[str, float]) -> eff
     )
 
 
+def _ramp_whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis) -> effects.Whitener:
+    """The whitener of the ramp test: the fitted PSD with the rate random walk at the upper
+    end of its :data:`RAMP_K_LEVEL` profile interval.  A random walk's wander over the record
+    looks like a trend; with K underestimated (unresolved, or soaked into B) the GLS would read
+    that wander as a ramp — measured: false ramps on clean axes of the independent generator,
+    whose axes all carry K.  At 95 % the bound hid a 12 B ramp (which inflates K's bound)."""
+    psd = noise_psd(fit, state.column_params)
+    j = fit.names.index("rate_random_walk")
+    k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
+    upper = effects.NoisePsd(
+        psd.white, psd.flicker, psd.cutoff_hz, max(psd.rrw, k2_hi), psd.gauss_markov
+    )
+    return effects.Whitener(upper, len(state.y_d), ax.dt)
+
+
 def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     """Evaluate every candidate against the current state (significance, hold-out, flags).
 
@@ -576,6 +726,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         effects.coupling_candidate("supply", state.y_d, ax.sig.supply_d, dt, "V", whiten),
         effects.step_candidate(state.y_d, dt, whiten),
         effects.warmup_candidate(state.y_d, dt, whiten),
+        effects.ramp_candidate(state.y_d, dt, _ramp_whitener(fit, state, ax)),
         # spikes: one candidate, from the raw series' robust statistics (found once, whole)
         ax.spike_candidate() if state.spikes is None else None,
     ]
@@ -586,7 +737,11 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         fit_new = new_state.fit(ax)
         hold = {"holds": True, "note": "spikes are local; no hold-out split"}
         if cand.regressors is not None:
-            refined = effects.Whitener(noise_psd(fit_new, state.column_params), len(state.y_d), dt)
+            refined = (
+                _ramp_whitener(fit_new, new_state, ax)
+                if cand.kind == "ramp"
+                else effects.Whitener(noise_psd(fit_new, state.column_params), len(state.y_d), dt)
+            )
             cand.refit(refined, state.y_d)
             new_state = _corrected_state(ax, state, cand)
             fit_new = new_state.fit(ax)
@@ -609,39 +764,48 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         # a p-value that underflowed to 0 ranks as the smallest positive double, not a crash
         margin = 2 * np.log(ALPHA / max(cand.p_value, np.finfo(float).tiny))
         trials.append(Trial(cand.kind, cand, float(margin), flags_ok, new_state, lambda h=hold: h))
-    for kind, grid in _grids(tau, ax.tau_min).items():
-        if kind in state.columns:
+    for kind, specs in _grids(ax, state).items():
+        name = _column_name(kind, state)
+        if name is None or not specs:
             continue
-        fits = _column_fits(
-            tau,
-            state.avar,
-            edf,
-            ax.tau_min,
-            state.columns,
-            _SHAPES[kind],
-            grid,
-            state.n_nonlinear,
-            fit.cutoff_hz,
-        )
-        p, fit_new = _best(fits)
-        cand = _column_candidate(kind, p, fit_new, state, ax)
-        shape = cand.params["frequency_hz" if kind == "sinusoid" else "tau_c_s"]
+        if kind == "narrowband":  # specs: coarse (centre, width) away from the modelled lines
+            seeds = _column_fits(
+                tau, state.avar, edf, ax.tau_min, state.columns, kind, specs,
+                state.n_nonlinear, fit.cutoff_hz,
+            )  # fmt: skip
+            spec, fits, fit_new = _narrowband_refine(ax, state, _best(seeds)[0], fit.cutoff_hz)
+        else:
+            fits = _column_fits(
+                tau,
+                state.avar,
+                edf,
+                ax.tau_min,
+                state.columns,
+                kind,
+                specs,
+                state.n_nonlinear,
+                fit.cutoff_hz,
+            )
+            spec, fit_new = _best(fits)
+        cand = _column_candidate(kind, spec, fit_new, state, ax)
         new_state = _State(
             state.avar,
             state.y_d,
             state.spikes,
-            state.columns | {kind: cand.column},
-            state.n_nonlinear + 1,
-            state.column_params | {kind: p},
-            effect_parameters=state.effect_parameters | {kind: shape},
+            state.columns | {name: cand.column},
+            state.n_nonlinear + N_SHAPE[kind],
+            state.column_params | ({name: spec[0]} if kind == "gauss_markov" else {}),
+            effect_parameters=state.effect_parameters | {name: (kind, cand.evidence["shape"])},
         )
         fit_named = new_state.fit(ax)
-        dbic, flags_ok = _judge(kind, fit_named, fit, good, 2, tau, state.avar, edf)
+        k = N_SHAPE[kind] + 1
+        dbic, flags_ok = _judge(kind, fit_named, fit, good, k, tau, state.avar, edf)
         cand.evidence["avar_delta_bic"] = dbic
-        if kind == "gauss_markov" and dbic >= DELTA_BIC:  # costly: significant ones only
-            cand.intervals = _gauss_markov_profile(fits, state.avar, edf)
+        if dbic >= DELTA_BIC:  # costly: significant ones only
+            cand.intervals |= _column_profile(kind, fits, state.avar, edf)
+            cand.evidence |= _spectrum_view(ax, state, cand)
         holdout = partial(_holdout_column, ax, state, cand)
-        trials.append(Trial(kind, cand, float(dbic - DELTA_BIC), flags_ok, new_state, holdout))
+        trials.append(Trial(name, cand, float(dbic - DELTA_BIC), flags_ok, new_state, holdout))
     return [_decide(t) for t in trials]
 
 
@@ -720,32 +884,71 @@ def _decide(t: Trial) -> Decision:
     line_p = cand.evidence.get("line_p_value")
     if line_p is not None and line_p >= ALPHA:
         reasons.append(f"no periodogram line above the band's noise (p {line_p:.3g} >= {ALPHA:g})")
+    competing = cand.evidence.get("competing_line") or {}
+    if competing.get("line_p_value", 1.0) < ALPHA:
+        reasons.append(
+            f"a periodogram line at {competing['frequency_hz']:.4g} Hz stands "
+            f"{competing['line_to_floor']:.3g}x above its local floor (p "
+            f"{competing['line_p_value']:.2g}): a sinusoid or narrowband vibration, not a smooth "
+            "Gauss-Markov spectrum"
+        )
+    excess = cand.evidence.get("band_excess")
+    if excess is not None and excess.get("p_value", 1.0) >= ALPHA:
+        reasons.append(
+            f"no excess of spectral power over the line's shoulders (ratio "
+            f"{excess.get('line_to_shoulders', float('nan')):.3g}, p "
+            f"{excess.get('p_value', 1.0):.2g} >= {ALPHA:g})"
+        )
+    rolloff = cand.evidence.get("rolloff")
+    if rolloff is not None and rolloff["p_value"] >= ALPHA:
+        reasons.append(
+            f"no roll-off towards Nyquist in the spectrum (high/mid band level "
+            f"{rolloff['high_to_mid']:.3g}, p {rolloff['p_value']:.2g} >= {ALPHA:g})"
+        )
     if not t.flags_ok:
         reasons.append("flags do not clear")
     return Decision(t, not reasons, "; ".join(reasons) or None, hold)
 
 
-def _column_candidate(kind, p, fit_new, state, ax) -> effects.Candidate:
-    """Parameters and intervals of an AVAR-column effect (profile over the grid + PSD line)."""
+def _column_candidate(kind, spec, fit_new, state, ax) -> effects.Candidate:
+    """Parameters and intervals of an AVAR-column effect at its best shape ``spec`` (the
+    sinusoid's frequency refined to its periodogram line; the value's interval conditional on
+    the shape until :func:`_column_profile` replaces it)."""
     tau, edf = ax.tau, ax.edf
     j = fit_new.names.index("_new")
     lo, hi = fit_new.profile_interval(state.avar, edf, j)
     amp = float(np.sqrt(fit_new.coef[j]))
+    column = _shape(kind)(tau, spec)
+    interval = [float(np.sqrt(lo)), float(np.sqrt(hi))]
+    n_params = N_SHAPE[kind] + 1
     if kind == "gauss_markov":
-        params = {"tau_c_s": p, "sigma": amp}
-        intervals = {"sigma": [float(np.sqrt(lo)), float(np.sqrt(hi))]}
-        column = effects.gauss_markov_avar(tau, p)
-        evidence = {"hump_tau_s": 1.89 * p}
-        return effects.Candidate(kind, params, intervals, evidence, column=column, n_params=2)
-    evidence: dict = {"avar_peak_tau_s": 0.371 / p}
+        params = {"tau_c_s": spec[0], "sigma": amp}
+        evidence = {"hump_tau_s": 1.89 * spec[0], "shape": spec}
+        return effects.Candidate(
+            kind, params, {"sigma": interval}, evidence, column=column, n_params=n_params
+        )
+    if kind == "narrowband":
+        params = {"frequency_hz": spec[0], "width_hz": spec[1], "rms": amp}
+        evidence = {"avar_peak_tau_s": 0.371 / spec[0], "shape": spec}
+        lines = [s[0] for k, s in state.effect_parameters.values() if k == "narrowband"]
+        for f1 in lines:
+            order = spec[0] / f1
+            if round(order) >= 2 and abs(order - round(order)) < 0.02 * round(order):
+                evidence["harmonic_of_hz"], evidence["harmonic"] = f1, round(order)
+        return effects.Candidate(
+            kind, params, {"rms": interval}, evidence, column=column, n_params=n_params
+        )
+    if kind == "prefilter":
+        params = {"filter": spec[0], "length_s": spec[1], "white_filtered": amp}
+        evidence = {"bandwidth_3db_hz": _bandwidth(spec), "shape": spec}
+        return effects.Candidate(
+            kind, params, {"white_filtered": interval}, evidence, column=column, n_params=n_params
+        )
+    p = spec[0]
+    evidence = {"avar_peak_tau_s": 0.371 / p}
     f0 = p
     if amp > 0:
-        use_full = p > 0.2 / ax.dt
-        line = (
-            effects.psd_line(ax.sig.y, ax.sig.tau0, p / 1.6, p * 1.6, state.spikes)
-            if use_full
-            else effects.psd_line(state.y_d, ax.dt, p / 1.6, p * 1.6)
-        )
+        line = _line(ax, state, p / 1.6, p * 1.6)
         evidence |= line
         f0 = line.get("frequency_hz", p)
     column = effects.sinusoid_avar(tau, f0)
@@ -758,18 +961,34 @@ def _column_candidate(kind, p, fit_new, state, ax) -> effects.Candidate:
     if "frequency_lo" in evidence:
         intervals["frequency_hz"] = [evidence["frequency_lo"], evidence["frequency_hi"]]
     params = {"frequency_hz": float(f0), "amplitude": amp}
-    return effects.Candidate(kind, params, intervals, evidence, column=column, n_params=2)
+    evidence["shape"] = (float(f0),)
+    return effects.Candidate(kind, params, intervals, evidence, column=column, n_params=n_params)
+
+
+def _bandwidth(spec: tuple) -> float:
+    """−3 dB bandwidth (Hz) of a prefilter (family, length L s, τ0): moving average 0.443/L,
+    Bartlett (sinc⁴) 0.32/L, first-order 1/(2πL)."""
+    family, length_s, _ = spec
+    return {"moving_average": 0.443, "bartlett": 0.3195, "first_order": 1 / (2 * np.pi)}[
+        family
+    ] / length_s
 
 
 def _holdout_column(ax: _Axis, state: _State, cand: effects.Candidate) -> dict:
-    """Term fitted on one half of the record must lower the other half's deviance, both ways."""
+    """Term fitted on one half of the record must lower the other half's deviance, both ways
+    (its shape searched over :func:`_grids` on the training half; a narrowband line's centre and
+    width kept at the whole record's: half a record resolves a line half as finely)."""
     halves = ax.half_curves(state)
-    shape = _SHAPES[cand.kind]
-    grid = _grids(ax.tau, ax.tau_min)[cand.kind]
+    shape = _shape(cand.kind)
+    specs = (
+        [cand.evidence["shape"]]
+        if cand.kind == "narrowband"
+        else _grids(ax, _State(state.avar, state.y_d, None))[cand.kind]
+    )
     gains = []
     for train, test in ((0, 1), (1, 0)):
         t_tr, a_tr, e_tr = halves[train]
-        p, fit_tr = _best(_column_fits(t_tr, a_tr, e_tr, ax.tau_min, {}, shape, grid, 0))
+        p, fit_tr = _best(_column_fits(t_tr, a_tr, e_tr, ax.tau_min, {}, cand.kind, specs, 0))
         amp2 = fit_tr.coef[fit_tr.names.index("_new")]
         t_te, a_te, e_te = halves[test]
         base = _fit(t_te, a_te, e_te, ax.tau_min)

@@ -1,0 +1,135 @@
+"""The closed loop's new kinds on synthetic axes: each label needs both views (AVAR shape and
+spectrum / time domain), and a clean axis gets none of them.
+
+The noise builder is a copy of ``synth_rate`` in tests/test_ieee952.py (no cross-test imports
+while tests/ moves to mirrored folders; it becomes a conftest fixture at merge).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from imupipe.model import effects, loop
+from imupipe.model.loop import AxisSignals, close_loop
+from imupipe.stats.allan import allan_curves
+
+TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
+DEG = np.pi / 180
+N_TRUE, B_TRUE = 0.05 * DEG, 0.008 * DEG  # the paper's gyro values, SI
+NEW_KINDS = {"narrowband", "prefilter", "ramp"}
+
+
+def synth_rate(n, tau0, rng, n_white=0.0, b_flicker=0.0):
+    """White N and flicker B (two-sided PSD B²/(2πf), IEEE 952 Annex C), SI rate units."""
+    y = n_white / np.sqrt(tau0) * rng.standard_normal(n)
+    f = np.fft.rfftfreq(8 * n, tau0)
+    shape = np.zeros_like(f)
+    shape[1:] = np.sqrt(b_flicker**2 / (2 * np.pi * f[1:]) / tau0)
+    y += np.fft.irfft(np.fft.rfft(rng.standard_normal(8 * n)) * shape, 8 * n)[:n]
+    return y
+
+
+def run(y):
+    curve = allan_curves(y, TAU0)[0]
+    return close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), curve)
+
+
+def base(seed):
+    rng = np.random.default_rng(seed)
+    return rng, synth_rate(N, TAU0, rng, N_TRUE, B_TRUE)
+
+
+@pytest.mark.parametrize("seed", [21, 22])
+def test_clean_axis_gets_no_new_term(seed):
+    _rng, y = base(seed)
+    res = run(y)
+    assert res.accepted == []
+    tried = {c.kind: c for c in res.rejected}
+    assert {"ramp", "prefilter", "narrowband"} <= set(tried)
+    # white noise has no roll-off: the prefilter's spectrum view says so when it is asked
+    assert all(c.reason for c in res.rejected)
+
+
+def test_linear_ramp_of_twelve_b_over_the_record_is_found():
+    _rng, y = base(23)
+    t = np.arange(N) * TAU0
+    slope = 12 * B_TRUE / t[-1]  # 12 B over the whole record
+    res = run(y + slope * (t - t.mean()))
+    kinds = [e.kind for e in res.accepted]
+    assert "ramp" in kinds
+    ramp = res.accepted[kinds.index("ramp")]
+    lo, hi = ramp.intervals["slope_per_s"]
+    assert lo < slope < hi
+    assert ramp.evidence["p_value_bonferroni"] < 1e-3
+
+
+def test_sinusoid_in_the_gauss_markov_range_is_not_labelled_gauss_markov():
+    """A 0.01 Hz tone (its AVAR peak at 37 s, inside the Gauss–Markov hump grid): its
+    periodogram line stands far above the local floor, so a Gauss–Markov label is refused
+    with that reason and the tone is reported as a sinusoid."""
+    _rng, y = base(24)
+    t = np.arange(N) * TAU0
+    res = run(y + 6 * B_TRUE * np.sin(2 * np.pi * 0.01 * t + 0.4))
+    kinds = [e.kind for e in res.accepted]
+    assert kinds[0] == "sinusoid"
+    assert "gauss_markov" not in kinds
+    lo, hi = res.accepted[0].intervals["frequency_hz"]
+    assert lo < 0.01 < hi
+
+
+def _decision(kind, evidence):
+    """The loop's verdict on a significant AVAR-column candidate that holds out of sample and
+    clears the flags, with this spectrum-view ``evidence``."""
+    cand = effects.Candidate(kind, {}, {}, {"avar_delta_bic": 50.0} | evidence, column=np.ones(3))
+    return loop._decide(loop.Trial(kind, cand, 40.0, True, None, lambda: {"holds": True}))
+
+
+def test_both_views_decide_the_label():
+    line = {"frequency_hz": 0.01, "line_to_floor": 300.0}
+    refused = _decision("gauss_markov", {"competing_line": line | {"line_p_value": 1e-9}})
+    assert not refused.accept
+    assert "0.01 Hz stands 300x above its local floor" in refused.reason
+    assert "not a smooth Gauss-Markov" in refused.reason
+    assert _decision("gauss_markov", {"competing_line": line | {"line_p_value": 0.2}}).accept
+    flat = {"line_to_shoulders": 1.02, "p_value": 0.4}
+    assert "no excess of spectral power" in _decision("narrowband", {"band_excess": flat}).reason
+    peak = {"line_to_shoulders": 40.0, "p_value": 1e-30}
+    assert _decision("narrowband", {"band_excess": peak}).accept
+    white = {"high_to_mid": 1.01, "p_value": 0.7, "band_hz": [40.0, 50.0]}
+    assert "no roll-off towards Nyquist" in _decision("prefilter", {"rolloff": white}).reason
+    lowpass = {"high_to_mid": 0.55, "p_value": 1e-40, "band_hz": [40.0, 50.0]}
+    assert _decision("prefilter", {"rolloff": lowpass}).accept
+
+
+def test_spectrum_views_read_the_data():
+    rng = np.random.default_rng(5)
+    white = rng.standard_normal(2**18)
+    assert effects.psd_rolloff(white, 0.01)["p_value"] > 1e-3
+    lowpassed = signal.lfilter([0.5, 0.5], [1.0], white)  # 2-tap average: |H|² = cos²(πf τ0)
+    roll = effects.psd_rolloff(lowpassed, 0.01)
+    assert roll["p_value"] < 1e-6
+    assert roll["high_to_mid"] < 0.3
+    t = np.arange(2**18) * 0.01
+    tone = white + 0.3 * np.sin(2 * np.pi * 3.0 * t)
+    assert effects.band_excess(tone, 0.01, 3.0, 0.01)["p_value"] < 1e-6
+    assert effects.band_excess(white, 0.01, 3.0, 0.01)["p_value"] > 1e-3
+
+
+def test_spread_line_is_a_narrowband_vibration_with_its_width():
+    rng, y = base(26)
+    f0, q = 0.05, 25.0  # a damped oscillator: line width f0/Q = 0.002 Hz
+    r = np.exp(-np.pi * f0 / q * TAU0)
+    x = signal.lfilter([1.0], [1, -2 * r * np.cos(2 * np.pi * f0 * TAU0), r * r],
+                       rng.standard_normal(N))  # fmt: skip
+    res = run(y + 3 * N_TRUE * x / x.std())
+    kinds = [e.kind for e in res.accepted]
+    assert kinds[0] == "narrowband"
+    line = res.accepted[0]
+    lo, hi = line.intervals["frequency_hz"]
+    assert lo < f0 < hi
+    assert line.params["width_hz"] == pytest.approx(f0 / q, rel=1.0)
+    assert line.evidence["band_excess"]["p_value"] < 1e-3
+    (term,) = [e for e in res.terms_after.effects if e.kind == "narrowband"]
+    assert term.as_model_term()["width_hz"] == line.params["width_hz"]
