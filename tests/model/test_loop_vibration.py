@@ -1,8 +1,7 @@
 """The closed loop's new kinds on synthetic axes: each label needs both views (AVAR shape and
 spectrum / time domain), and a clean axis gets none of them.
 
-The noise builder is a copy of ``synth_rate`` in tests/test_ieee952.py (no cross-test imports
-while tests/ moves to mirrored folders; it becomes a conftest fixture at merge).
+The noise is the paper's gyro (``paper_gyro``, tests/model/conftest.py).
 """
 
 from __future__ import annotations
@@ -16,19 +15,7 @@ from imupipe.model.loop import AxisSignals, close_loop
 from imupipe.stats.allan import allan_curves
 
 TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
-DEG = np.pi / 180
-N_TRUE, B_TRUE = 0.05 * DEG, 0.008 * DEG  # the paper's gyro values, SI
 NEW_KINDS = {"narrowband", "prefilter", "ramp"}
-
-
-def synth_rate(n, tau0, rng, n_white=0.0, b_flicker=0.0):
-    """White N and flicker B (two-sided PSD B²/(2πf), IEEE 952 Annex C), SI rate units."""
-    y = n_white / np.sqrt(tau0) * rng.standard_normal(n)
-    f = np.fft.rfftfreq(8 * n, tau0)
-    shape = np.zeros_like(f)
-    shape[1:] = np.sqrt(b_flicker**2 / (2 * np.pi * f[1:]) / tau0)
-    y += np.fft.irfft(np.fft.rfft(rng.standard_normal(8 * n)) * shape, 8 * n)[:n]
-    return y
 
 
 def run(y):
@@ -36,13 +23,19 @@ def run(y):
     return close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), curve)
 
 
-def base(seed):
-    rng = np.random.default_rng(seed)
-    return rng, synth_rate(N, TAU0, rng, N_TRUE, B_TRUE)
+@pytest.fixture
+def base(paper_gyro):
+    """``base(seed)``: (its generator, 3.6 h of the paper's gyro noise at 10 Hz)."""
+
+    def make(seed):
+        rng = np.random.default_rng(seed)
+        return rng, paper_gyro.rate(N, TAU0, rng)
+
+    return make
 
 
 @pytest.mark.parametrize("seed", [21, 22])
-def test_clean_axis_gets_no_new_term(seed):
+def test_clean_axis_gets_no_new_term(seed, base):
     _rng, y = base(seed)
     res = run(y)
     assert res.accepted == []
@@ -52,10 +45,10 @@ def test_clean_axis_gets_no_new_term(seed):
     assert all(c.reason for c in res.rejected)
 
 
-def test_linear_ramp_of_twelve_b_over_the_record_is_found():
+def test_linear_ramp_of_twelve_b_over_the_record_is_found(base, paper_gyro):
     _rng, y = base(23)
     t = np.arange(N) * TAU0
-    slope = 12 * B_TRUE / t[-1]  # 12 B over the whole record
+    slope = 12 * paper_gyro.b / t[-1]  # 12 B over the whole record
     res = run(y + slope * (t - t.mean()))
     kinds = [e.kind for e in res.accepted]
     assert "ramp" in kinds
@@ -65,13 +58,13 @@ def test_linear_ramp_of_twelve_b_over_the_record_is_found():
     assert ramp.evidence["p_value_bonferroni"] < 1e-3
 
 
-def test_sinusoid_in_the_gauss_markov_range_is_not_labelled_gauss_markov():
+def test_sinusoid_in_the_gauss_markov_range_is_not_labelled_gauss_markov(base, paper_gyro):
     """A 0.01 Hz tone (its AVAR peak at 37 s, inside the Gauss–Markov hump grid): its
     periodogram line stands far above the local floor, so a Gauss–Markov label is refused
     with that reason and the tone is reported as a sinusoid."""
     _rng, y = base(24)
     t = np.arange(N) * TAU0
-    res = run(y + 6 * B_TRUE * np.sin(2 * np.pi * 0.01 * t + 0.4))
+    res = run(y + 6 * paper_gyro.b * np.sin(2 * np.pi * 0.01 * t + 0.4))
     kinds = [e.kind for e in res.accepted]
     assert kinds[0] == "sinusoid"
     assert "gauss_markov" not in kinds
@@ -117,13 +110,13 @@ def test_spectrum_views_read_the_data():
     assert effects.band_excess(white, 0.01, 3.0, 0.01)["p_value"] > 1e-3
 
 
-def test_spread_line_is_a_narrowband_vibration_with_its_width():
+def test_spread_line_is_a_narrowband_vibration_with_its_width(base, paper_gyro):
     rng, y = base(26)
     f0, q = 0.05, 25.0  # a damped oscillator: line width f0/Q = 0.002 Hz
     r = np.exp(-np.pi * f0 / q * TAU0)
     x = signal.lfilter([1.0], [1, -2 * r * np.cos(2 * np.pi * f0 * TAU0), r * r],
                        rng.standard_normal(N))  # fmt: skip
-    res = run(y + 3 * N_TRUE * x / x.std())
+    res = run(y + 3 * paper_gyro.n * x / x.std())
     kinds = [e.kind for e in res.accepted]
     assert kinds[0] == "narrowband"
     line = res.accepted[0]
