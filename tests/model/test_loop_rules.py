@@ -528,37 +528,40 @@ def test_temperature_coupling_past_bonferroni_is_accepted(run_axis):
     res = run_axis("temperature", 4e-4)
     assert [e.kind for e in res.accepted] == ["temperature"]
     ev = res.accepted[0].evidence
-    assert ev["n_time_domain_tests"] == 3  # temperature, bias step, warm-up (no supply channel)
-    assert ev["p_value_family"] == 3 * ev["p_value_bonferroni"] < 1e-3
+    assert ev["n_time_domain_tests"] == 4  # temperature, step, warm-up, ramp (no supply)
+    assert ev["p_value_family"] == 4 * ev["p_value_bonferroni"] < 1e-3
     assert ev["holdout"]["holds"] is True
 
 
 def test_temperature_coupling_significant_only_before_the_family_factor_is_rejected(run_axis):
-    """Coupling 3.6e-4 rad/s/°C: p 5.6e-4 over its own 6 options, × 3 time-domain candidates
-    tried in the round = 1.7e-3 ≥ α."""
+    """Coupling 3.6e-4 rad/s/°C: p 5.6e-4 over its own 6 options, × 4 time-domain candidates
+    tried in the round = 2.2e-3 ≥ α."""
     rec = _candidate(run_axis("temperature", 3.6e-4), "temperature")
     ev = rec.evidence
-    assert ev["p_value_bonferroni"] < 1e-3 <= 3 * ev["p_value_bonferroni"], "re-tune coupling"
-    assert ev["p_value_family"] == 3 * ev["p_value_bonferroni"]
+    assert ev["p_value_bonferroni"] < 1e-3 <= 4 * ev["p_value_bonferroni"], "re-tune coupling"
+    assert ev["p_value_family"] == 4 * ev["p_value_bonferroni"]
     assert rec.reason == f"p {ev['p_value_family']:.3g} >= 0.001"
     assert ev["holdout"] == {"holds": None}
 
 
 def test_candidates_not_significant_on_a_clean_axis_are_rejected_with_family_p(run_axis):
     """Clean axis (the temperature run's noise without coupling): every time-domain p is the
-    per-candidate Bonferroni p times 3, capped at 1, and the reason shows it."""
+    per-candidate Bonferroni p times 4, capped at 1, and the reason shows it."""
     res = run_axis("temperature", 0.0)
     assert res.accepted == []
     kinds = {r.kind for r in res.rejected}
-    assert kinds == {"temperature", "bias_step", "rate_ramp", "sinusoid", "gauss_markov"}
+    assert kinds == {
+        "temperature", "bias_step", "rate_ramp", "ramp", "sinusoid", "gauss_markov",
+        "narrowband", "prefilter",
+    }  # fmt: skip
     for rec in res.rejected:
         ev = rec.evidence
-        if rec.kind in ("sinusoid", "gauss_markov"):
+        if rec.kind in ("sinusoid", "gauss_markov", "narrowband", "prefilter"):
             assert ev["avar_delta_bic"] < 10
             assert rec.reason.startswith(f"delta BIC {ev['avar_delta_bic']:.1f} < 10")
             continue
-        assert ev["n_time_domain_tests"] == 3
-        assert ev["p_value_family"] == min(1.0, 3 * ev["p_value_bonferroni"])
+        assert ev["n_time_domain_tests"] == 4
+        assert ev["p_value_family"] == min(1.0, 4 * ev["p_value_bonferroni"])
         assert rec.reason.startswith(f"p {ev['p_value_family']:.3g} >= 0.001")
     # a p-value times the options searched is capped at 1 (the step: ~3000 change points)
     assert _candidate(res, "bias_step").evidence["p_value_bonferroni"] == 1.0

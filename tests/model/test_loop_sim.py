@@ -237,4 +237,7 @@ def test_clean_recording_accepts_nothing(seed):
             "rate_ramp",
             "sinusoid",
             "gauss_markov",
+            "narrowband",
+            "prefilter",
+            "ramp",
         }, axis

@@ -109,5 +109,8 @@ def test_prefilter_term_is_a_short_tau_deficit_of_the_white_noise():
     deficit = ieee952.effect_shape("prefilter", ("bartlett", 0.04, tau0))(tau)
     # white noise through a low-pass: less variance at short τ, the white level at long τ
     assert np.all(deficit < 0)
-    assert abs(deficit[-1]) * tau[-1] < 1e-3
+    # past the filter's length the deficit is exactly -P/τ² (a FIR filter), so against the
+    # white level 1/τ it falls tenfold per decade: 2.76e-3 at 10 s for a 40 ms Bartlett
+    assert deficit[3] * tau[3] ** 2 == pytest.approx(deficit[4] * tau[4] ** 2, rel=1e-9)
+    assert abs(deficit[-1]) * tau[-1] < 3e-3
     assert deficit[0] * tau[0] < -0.5
