@@ -73,8 +73,10 @@ def status(key):
 
 dec._CHUNK = 1 << 16  # temporaries of 0.5 MB: the fixed costs stay small next to 24 MB columns
 pl.repeat(None, 1, dtype=pl.UInt32, eager=True)  # polars' first call commits ~9 MB (once)
-dec._cdr_messages(  # so does loading the compiled walk and gather (numba, LLVM): ~40 MB, once
-    next(dec.McapScanner(Path(sys.argv[1])).batches()), 8, dec._IMU_TAIL
+next(  # so does loading the compiled walks (numba, LLVM): ~40 MB, once
+    dec.McapScanner(Path(sys.argv[1])).cdr_batches(
+        lambda c, s: dec.LAYOUTS["imu"] if s.name == dec.IMU_SCHEMA else None
+    )
 )
 release_freed_memory()  # as the spilled column source does before building a column
 with open("/proc/self/clear_refs", "w") as f:

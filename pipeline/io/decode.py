@@ -44,8 +44,8 @@ from mcap.records import Channel, Schema
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
 from imupipe.errors import InputError
-from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, McapScanner, MessageBatch
-from imupipe.io.mcap_walk import gather
+from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, McapScanner
+from imupipe.io.mcap_walk import CDR_HEAD, CdrLayout
 from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
 from imupipe.vocab import AXES
 
@@ -55,6 +55,15 @@ TEMPERATURE_SCHEMA = "sensor_msgs/msg/Temperature"
 _IMU_TAIL = 8 * (4 + 9 + 3 + 9 + 3 + 9)  # orientation..linear_acceleration_covariance, bytes
 _IMU_GYRO = 8 * (4 + 9)  # offset of angular_velocity within the tail
 _IMU_ACCEL = 8 * (4 + 9 + 3 + 9)
+LAYOUTS = {
+    "adis16364": CdrLayout(4, TAIL_SIZE, ((0, TAIL_SIZE),)),
+    "imu": CdrLayout(8, _IMU_TAIL, ((_IMU_GYRO, 24), (_IMU_ACCEL, 24))),  # gyro @0, accel @24
+    "temperature": CdrLayout(8, 16, ((0, 8),)),
+}
+"""By kind of channel, what the scan copies of each message (:mod:`imupipe.io.mcap_walk`):
+the header, then for our frames every field after it (``Adis16364Frame.msg``, aligned to 4),
+for ``Imu`` angular_velocity and linear_acceleration (3 float64 each, fields aligned to 8), for
+``Temperature`` the temperature (float64; the variance follows)."""
 
 
 DECODED_SCHEMA = pl.Schema(
@@ -90,56 +99,25 @@ class ImuRecording:
     temperature_topic: str | None = None
 
 
-_CDR_HEAD = 16
-"""Payload bytes up to the frame_id characters: encapsulation (4), header.stamp sec i32 and
-nanosec u32, frame_id length u32."""
-
-
 @dataclass(frozen=True)
 class _CdrMessages:
-    """Well-formed little-endian CDR messages of one channel: the bytes holding them, each one's
-    first :data:`_CDR_HEAD` bytes and where its fields after the header start."""
+    """Well-formed little-endian CDR messages of one channel from one chunk: per message, its
+    :data:`CDR_HEAD` header bytes then the fields of its :class:`CdrLayout`."""
 
-    data: np.ndarray
-    head: np.ndarray  # (n, 16) uint8
-    tail: np.ndarray  # (n,) int64: byte of ``data`` where the fields after the header start
+    rows: np.ndarray  # (n, layout.width) uint8
     log_time: np.ndarray  # (n,) int64, ns
 
     def __len__(self) -> int:
-        return len(self.tail)
+        return len(self.rows)
 
     def stamps(self) -> np.ndarray:
         """header.stamp (sec i32 @4, nanosec u32 @8 of the payload) → ns, int64."""
-        sec = self.head[:, 4:8].view("<i4")[:, 0].astype(np.int64)
-        return sec * 1_000_000_000 + self.head[:, 8:12].view("<u4")[:, 0]
+        sec = self.rows[:, 4:8].view("<i4")[:, 0].astype(np.int64)
+        return sec * 1_000_000_000 + self.rows[:, 8:12].view("<u4")[:, 0]
 
-    def f64(self, offset: int, count: int) -> np.ndarray:
-        """``(n, count)`` float64 from byte ``offset`` of the fields after the header."""
-        return gather(self.data, self.tail + offset, 8 * count, "<f8")
-
-    def tail_bytes(self, size: int) -> np.ndarray:
-        """The first ``size`` bytes after the header, ``(n, size)`` uint8."""
-        return gather(self.data, self.tail, size)
-
-
-def _cdr_messages(batch: MessageBatch, alignment: int, tail: int) -> tuple[_CdrMessages, int]:
-    """The batch's well-formed messages, and how many are not: a well-formed payload is
-    little-endian CDR whose header's frame_id length (u32 at payload byte 12, NUL included) puts
-    the ``alignment``-aligned fields after it (alignment counted from the end of the 4-byte
-    encapsulation), ``tail`` bytes, exactly at the payload's end.  Anything else is malformed for
-    the schema and cannot be decoded.  The offsets are computed per message: the frame_id may
-    change length from one message to the next."""
-    offset, size, log_time = batch.offset, batch.size, batch.log_time
-    if not (long_enough := size >= _CDR_HEAD).all():
-        offset, size, log_time = offset[long_enough], size[long_enough], log_time[long_enough]
-    head = gather(batch.data, offset, _CDR_HEAD)
-    fid_len = head[:, 12:16].view("<u4")[:, 0].astype(np.int64)
-    start = 4 + (12 + fid_len + alignment - 1) // alignment * alignment
-    ok = (head[:, 0] == 0) & (head[:, 1] == 1) & (fid_len >= 1) & (start + tail == size)
-    if not ok.all():
-        head, offset, start, log_time = head[ok], offset[ok], start[ok], log_time[ok]
-    messages = _CdrMessages(batch.data, head, offset + start, log_time.astype(np.int64))
-    return messages, len(batch) - len(messages)
+    def f64(self, field: int, count: int) -> np.ndarray:
+        """``(n, count)`` float64 from byte ``field`` of the layout's fields (as copied)."""
+        return self.rows[:, CDR_HEAD + field : CDR_HEAD + field + 8 * count].view("<f8")
 
 
 _BLOCK_BYTES = 32 << 20
@@ -293,7 +271,7 @@ def _decode_adis(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None)
     The burst words are decoded batch by batch and kept as integer counts (an axis costs 2 bytes
     a frame until :func:`_adis_frame` scales it): the (n, 11) words of a whole recording are
     never held.  Stamps are kept only for ``t_s`` / ``stamp_ns``."""
-    block = decode_frames(np.hstack([m.head, m.tail_bytes(TAIL_SIZE)]))
+    block = decode_frames(m.rows)
     counts, new_data, alarm = adis.decode_burst(block.burst)
 
     def wanted(*names: str) -> bool:
@@ -331,8 +309,8 @@ def _decode_imu(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) 
         out.add(
             stamp_ns=m.stamps(),
             log_time_ns=m.log_time,
-            gyro=m.f64(_IMU_GYRO, 3),
-            accel=m.f64(_IMU_ACCEL, 3),
+            gyro=m.f64(0, 3),
+            accel=m.f64(24, 3),
         )
         return
     if columns & {"t_s", "stamp_ns", "temp_c"}:
@@ -340,12 +318,11 @@ def _decode_imu(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) 
     if "t_s" in columns:
         out.add(log_time_ns=m.log_time)
     if "nonfinite" in columns:
-        gyro, accel = m.f64(_IMU_GYRO, 3), m.f64(_IMU_ACCEL, 3)
+        gyro, accel = m.f64(0, 3), m.f64(24, 3)
         out.add(nonfinite=~(np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)))
     for i, name in enumerate(AXES):
         if name in columns:
-            start = _IMU_GYRO + 8 * i if i < 3 else _IMU_ACCEL + 8 * (i - 3)
-            out.add(**{name: m.f64(start, 1)[:, 0]})
+            out.add(**{name: m.f64(8 * i, 1)[:, 0]})
 
 
 def _decode_temperature(m: _CdrMessages, out: _Columns) -> None:
@@ -737,16 +714,16 @@ def scan(
     files, file_warnings = bag_files(path)
     kinds = {SCHEMA_NAME: "adis16364", IMU_SCHEMA: "imu", TEMPERATURE_SCHEMA: "temperature"}
 
-    def wanted(channel: Channel, schema: Schema | None) -> bool:
+    def layout(channel: Channel, schema: Schema | None) -> CdrLayout | None:
         if schema is None or schema.name not in kinds:
-            return False
+            return None
         kind = topic_kind.setdefault(channel.topic, kinds[schema.name])
         if kind != kinds[schema.name]:  # its messages cannot share one set of columns
             raise InputError(
                 f"{path}: topic {channel.topic!r} carries two message types "
                 f"({kind} and {kinds[schema.name]}); refusing to mix them"
             )
-        return True
+        return LAYOUTS[kind]
 
     skip = frozenset({"log_time_ns"} if keep_one_time_base else ())
 
@@ -763,10 +740,10 @@ def scan(
     metadata: dict[str, dict[str, str]] = {}
     warnings: list[str] = list(file_warnings)
     done = 0
-    layouts = {  # kind: (decoder, alignment of the fields after the header, their size in bytes)
-        "adis16364": (lambda m, out: _decode_adis(m, out, columns), 4, TAIL_SIZE),
-        "imu": (lambda m, out: _decode_imu(m, out, columns), 8, _IMU_TAIL),
-        "temperature": (_decode_temperature, 8, 16),
+    decoders = {
+        "adis16364": lambda m, out: _decode_adis(m, out, columns),
+        "imu": lambda m, out: _decode_imu(m, out, columns),
+        "temperature": _decode_temperature,
     }
     malformed: dict[str, int] = defaultdict(int)
     frame_ids: dict[str, str] = {}  # the header.frame_id of each topic's first message
@@ -774,22 +751,21 @@ def scan(
         offset = done
         scanner = McapScanner(
             file,
-            wanted=wanted,
             progress=progress and (lambda n, o=offset: progress(o + n)),
             max_chunk_bytes=max_chunk_bytes,
         )
         report = scanner.report
-        for batch in scanner.batches():
+        for batch in scanner.cdr_batches(layout):
             channel = report.channels[batch.channel_id]
-            decoder, alignment, tail = layouts[kinds[report.schemas[channel.schema_id].name]]
-            messages, bad = _cdr_messages(batch, alignment, tail)
-            if bad:
-                malformed[channel.topic] += bad
-            if len(messages):
+            if batch.bad:
+                malformed[channel.topic] += batch.bad
+            if batch.first is not None:
                 if channel.topic not in frame_ids:
-                    first = batch.data[batch.offset[0] : batch.offset[0] + batch.size[0]]
-                    frame_ids[channel.topic] = _frame_id(first)
-                decoder(messages, channels[channel.topic])
+                    frame_ids[channel.topic] = _frame_id(batch.first)
+                decoder = decoders[kinds[report.schemas[channel.schema_id].name]]
+                decoder(
+                    _CdrMessages(batch.rows, batch.log_time.view(np.int64)), channels[channel.topic]
+                )
         done += report.file_bytes
         _same_device(path, metadata, report.metadata, file)
         metadata.update(report.metadata)
