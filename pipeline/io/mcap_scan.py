@@ -373,6 +373,7 @@ def _unpack(body: bytes, table: CdrTable | None = None, version: int = 0) -> _Un
     if chunk.uncompressed_crc and crc32(data) != chunk.uncompressed_crc:
         return _Unpacked(chunk, np.empty(0, np.uint8), "CRC mismatch")
     buf = np.frombuffer(data, np.uint8)
+    buf.flags.writeable = False  # an uncompressed chunk's bytes are writable: one compiled type
     index = index_messages(buf)
     rows = None if table is None else cdr_rows(buf, index, table, stop_at_unknown=True)
     return _Unpacked(chunk, buf, "", index, rows, version)
@@ -413,6 +414,7 @@ class McapScanner:
         self._block_bytes = MESSAGE_BLOCK[0]
         self._layout: Callable[[Channel, Schema | None], CdrLayout | None] | None = None
         self._table = CdrTable()
+        self._ahead: CdrTable | None = None  # the table as chunks read ahead see it (a copy)
         self._redefined = 0  # channels declared again with another layout (or none)
 
     def _add_channel(self, channel: Channel) -> None:
@@ -423,6 +425,7 @@ class McapScanner:
             return
         layout = self._layout(channel, schema)
         self._redefined += self._table.set(channel.id, layout)
+        self._ahead = None
         self._wanted_ids[channel.id] = layout is not None
 
     def runs(self) -> Iterator[MessageRun]:
@@ -450,7 +453,9 @@ class McapScanner:
         """The arguments of the :func:`_unpack` job of a chunk read ahead."""
         if self._layout is None:
             return (body,)
-        return body, self._table.copy(), self._redefined
+        if self._ahead is None:
+            self._ahead = self._table.copy()
+        return body, self._ahead, self._redefined
 
     def _scan(self) -> Iterator:
         with ThreadPoolExecutor(UNPACK_THREADS, thread_name_prefix="mcap-unpack") as pool:
@@ -504,8 +509,13 @@ class McapScanner:
                     head = f.read(_CHUNK_FIXED)
                     if self._too_large(head, length):
                         f.seek(length - _CHUNK_FIXED, os.SEEK_CUR)
-                    else:
-                        yield opcode, head + f.read(length - _CHUNK_FIXED), length
+                    else:  # read in place: joining head and rest would copy the chunk again
+                        body = bytearray(length)
+                        body[:_CHUNK_FIXED] = head
+                        got = _CHUNK_FIXED + f.readinto(memoryview(body)[_CHUNK_FIXED:])
+                        if got < length:  # a file cut meanwhile: as short as read
+                            body = body[:got]
+                        yield opcode, body, length
                 elif opcode in _PARSED and length <= report.max_chunk_bytes:
                     yield opcode, f.read(length), length
                 else:
