@@ -43,9 +43,9 @@ from pathlib import Path
 
 import numpy as np
 import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.reader import make_reader
 from mcap.records import Chunk
-from mcap.stream_reader import StreamReader
 from rosbags.highlevel import AnyReader
 
 from imupipe.device.adis16364 import DeviceConfig, config_for_rate
@@ -75,14 +75,18 @@ def iter_messages(path: Path, topic: str = IMU_TOPIC) -> int:
 
 
 def inflate_only(path: Path) -> int:
-    """Decompress every zstd chunk of the file and nothing else; returns the chunks."""
+    """Decompress every zstd chunk of the file (found through its chunk index) and nothing
+    else; returns the chunks."""
     count = 0
     inflater = zstandard.ZstdDecompressor()
     with open(path, "rb") as f:
-        for record in StreamReader(f, emit_chunks=True).records:
-            if isinstance(record, Chunk) and record.compression == "zstd":
-                inflater.decompress(record.data, max_output_size=record.uncompressed_size)
-                count += 1
+        for index in make_reader(f).get_summary().chunk_indexes:
+            if index.compression != "zstd":
+                continue
+            f.seek(index.chunk_start_offset + 1 + 8)  # past the record's opcode and length
+            chunk = Chunk.read(ReadDataStream(f))
+            inflater.decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+            count += 1
     return count
 
 

@@ -95,7 +95,7 @@ def big_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.mark.parametrize(
     ("columns", "columns_alive"),
     [
-        ("gyro_x", 1),  # the axis, collected in blocks and returned without a joining copy
+        ("gyro_x", 1),  # the axis, collected in one growing mapping: no joining copy
         ("temp_c,supply_v", 1),  # temp_c over the stamps' buffer; supply_v a null constant
         # stamps and log time are both needed to choose the time base; t_s goes over one
         ("t_s,counter,flag_nd,flag_ea,saturated,nonfinite", 2),
@@ -133,9 +133,9 @@ SUBSETS = [
 def test_subsets_equal_the_whole_decode(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stamps_set: bool
 ) -> None:
-    """Blocks joined, t_s over the log time, temp_c over the stamps: the same values (bit for
+    """Columns grown, t_s over the log time, temp_c over the stamps: the same values (bit for
     bit), dtypes and nulls as the whole decode, on either time base."""
-    monkeypatch.setattr(dec, "_BLOCK_BYTES", 40_000)  # several blocks a column, split runs
+    monkeypatch.setattr(dec, "_FIRST_MAP_BYTES", 40_000)  # each column grows several times
     monkeypatch.setattr(dec, "_CHUNK", 3_000)  # several steps of the chunked arithmetic
     path = write_bag(tmp_path / "small.mcap", 21_500, stamps_set, nan_at=7_777)
     whole = decode(path)
@@ -162,8 +162,8 @@ def test_subsets_equal_the_whole_decode(
                 assert part.warnings == whole.warnings
 
 
-def test_column_blocks_join_like_concatenate(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(dec, "_BLOCK_BYTES", 1_000)
+def test_column_grows_and_joins_like_concatenate(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(dec, "_FIRST_MAP_BYTES", 1_000)  # grown by doubling and by a big part
     rng = np.random.default_rng(0)
     for shape, dtype in (((), np.int64), ((3,), np.float64), ((), np.bool_)):
         parts = [rng.normal(size=(k, *shape)).astype(dtype) for k in (7, 300, 0, 1, 126, 2_000)]
@@ -171,7 +171,7 @@ def test_column_blocks_join_like_concatenate(monkeypatch: pytest.MonkeyPatch) ->
         for p in parts:
             column.add(p)
         joined = column.join()
-        assert joined.dtype == dtype and not column.blocks
+        assert joined.dtype == dtype and column.map is None
         np.testing.assert_array_equal(joined, np.concatenate(parts))
 
 
@@ -180,7 +180,7 @@ def test_adis_subsets_equal_the_whole_decode(tmp_path: Path, monkeypatch: pytest
     scaled at the end): the same values, dtypes and flags as the whole decode."""
     from test_lowmem import adis_recording
 
-    monkeypatch.setattr(dec, "_BLOCK_BYTES", 40_000)
+    monkeypatch.setattr(dec, "_FIRST_MAP_BYTES", 40_000)
     path = adis_recording(tmp_path / "adis.mcap")
     f = decode(path).frames
     assert f["saturated"].sum() == 1 and f["flag_nd"].all()

@@ -509,13 +509,9 @@ class McapScanner:
                     head = f.read(_CHUNK_FIXED)
                     if self._too_large(head, length):
                         f.seek(length - _CHUNK_FIXED, os.SEEK_CUR)
-                    else:  # read in place: joining head and rest would copy the chunk again
-                        body = bytearray(length)
-                        body[:_CHUNK_FIXED] = head
-                        got = _CHUNK_FIXED + f.readinto(memoryview(body)[_CHUNK_FIXED:])
-                        if got < length:  # a file cut meanwhile: as short as read
-                            body = body[:got]
-                        yield opcode, body, length
+                    else:  # read whole: joining head and rest would copy the chunk again
+                        f.seek(-_CHUNK_FIXED, os.SEEK_CUR)
+                        yield opcode, f.read(length), length
                 elif opcode in _PARSED and length <= report.max_chunk_bytes:
                     yield opcode, f.read(length), length
                 else:
