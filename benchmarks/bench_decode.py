@@ -12,7 +12,10 @@ Writer, zstd chunks of 1 MiB, :mod:`imupipe.testing.busy_bag`):
 * ``adis+tf``: our ADIS16364 frames at ``--imu-rate`` Hz interleaved with ``/tf``;
 * with ``--imu-temp-hours H``: ``sensor_msgs/msg/Imu`` at 100 Hz and a 10 Hz Temperature topic,
   H hours (issue 10 measured 41 s to decode 12 h of it);
-* with ``--recorder-hours H``: our recorder's own file (ADIS frames alone, simulated).
+* with ``--recorder-hours H``: our recorder's own file (ADIS frames alone, simulated);
+* with ``--bag DIR`` (repeatable): a rosbag2 directory you already have, its IMU on
+  ``--topic`` (``sensor_msgs/msg/Imu``, for rosbags to deserialise; the generated bags above
+  are then not made: ``--minutes 0``).
 
 Each compressed bag also gets the time to decompress its chunks alone (zstandard, the same
 library ours uses, one thread): the floor of any decoder that reads every chunk.
@@ -27,7 +30,7 @@ call loads the compiled kernels); each baseline once.
 bag, run as a user runs it (a child process).
 
 Usage: ``python benchmarks/bench_decode.py [--minutes 60] [--imu-rate 200] [--analyze]
-[--imu-temp-hours 12] [--recorder-hours 12]``
+[--imu-temp-hours 12] [--recorder-hours 12] [--bag DIR --topic /imu/data]``
 """
 
 from __future__ import annotations
@@ -90,11 +93,11 @@ def inflate_only(path: Path) -> int:
     return count
 
 
-def any_reader(bag: Path) -> int:
+def any_reader(bag: Path, topic: str = IMU_TOPIC) -> int:
     """IMU messages through rosbags' AnyReader, deserialised, the six axes read out."""
     count = 0
     with AnyReader([bag]) as reader:
-        connections = [c for c in reader.connections if c.topic == IMU_TOPIC]
+        connections = [c for c in reader.connections if c.topic == topic]
         for connection, _, raw in reader.messages(connections=connections):
             msg = reader.deserialize(raw, connection.msgtype)
             w, a = msg.angular_velocity, msg.linear_acceleration
@@ -152,7 +155,7 @@ def bench(
     print(line("mcap iter_messages", base, n))
     print(ratio("iter_messages", base, ours))
     if rosbags:
-        anyr, count = timed(lambda: any_reader(bag))
+        anyr, count = timed(lambda: any_reader(bag, topic))
         assert count == n, (count, n)
         print(line("rosbags AnyReader", anyr, n))
         print(ratio("AnyReader", anyr, ours))
@@ -176,7 +179,14 @@ def main() -> None:
         default=0.0,
         help="also our recorder's own file (ADIS frames alone) of this length at --imu-rate",
     )
+    parser.add_argument("--bag", type=Path, action="append", default=[], help="a rosbag2 dir")
+    parser.add_argument("--topic", default=IMU_TOPIC, help="the IMU topic of --bag")
     args = parser.parse_args()
+    for bag in args.bag:
+        mcap_file = next(iter(sorted(bag.glob("*.mcap"))))
+        bench(str(bag), bag, mcap_file, args.repeat, rosbags=True, topic=args.topic)
+    if args.minutes <= 0:
+        return
     seconds = args.minutes * 60
     with tempfile.TemporaryDirectory() as tmp:
         imu = imu_stream(IMU_TOPIC, seconds, args.imu_rate, seed=1, awkward=False)
