@@ -7,8 +7,18 @@ Writer, zstd chunks of 1 MiB, :mod:`imupipe.testing.busy_bag`):
 * ``busy``: ``sensor_msgs/msg/Imu`` at ``--imu-rate`` Hz (frame_id changing length per message)
   + ``/tf`` 100 Hz + ``/odom`` 50 Hz + a 10 Hz temperature topic;
 * ``busy+camera``: the same plus a 10 Hz ``sensor_msgs/msg/CompressedImage`` of 20 kB;
+* ``busy, no compression``: the busy bag's topics in uncompressed chunks (the decoding itself,
+  without the decompression that bounds the zstd bags);
 * ``adis+tf``: our ADIS16364 frames at ``--imu-rate`` Hz interleaved with ``/tf``;
-* with ``--recorder-hours H``: our recorder's own file (ADIS frames alone, simulated).
+* with ``--imu-temp-hours H``: ``sensor_msgs/msg/Imu`` at 100 Hz and a 10 Hz Temperature topic,
+  H hours (issue 10 measured 41 s to decode 12 h of it);
+* with ``--recorder-hours H``: our recorder's own file (ADIS frames alone, simulated);
+* with ``--bag DIR`` (repeatable): a rosbag2 directory you already have, its IMU on
+  ``--topic`` (``sensor_msgs/msg/Imu``, for rosbags to deserialise; the generated bags above
+  are then not made: ``--minutes 0``).
+
+Each compressed bag also gets the time to decompress its chunks alone (zstandard, the same
+library ours uses, one thread): the floor of any decoder that reads every chunk.
 
 Ours is :func:`imupipe.io.decode.decode` (whole decode contract: stamps, six axes in SI units,
 temperature, time base); the baselines only get the IMU messages (``iter_messages`` without any
@@ -20,7 +30,7 @@ call loads the compiled kernels); each baseline once.
 bag, run as a user runs it (a child process).
 
 Usage: ``python benchmarks/bench_decode.py [--minutes 60] [--imu-rate 200] [--analyze]
-[--recorder-hours 12]``
+[--imu-temp-hours 12] [--recorder-hours 12] [--bag DIR --topic /imu/data]``
 """
 
 from __future__ import annotations
@@ -34,15 +44,26 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.reader import make_reader
+from mcap.records import Chunk
 from rosbags.highlevel import AnyReader
 
 from imupipe.device.adis16364 import DeviceConfig, config_for_rate
 from imupipe.device.frame_schema import DEFAULT_TOPIC, METADATA_NAME
-from imupipe.io.decode import decode
+from imupipe.io.decode import TEMPERATURE_SCHEMA, decode
 from imupipe.recording.recorder import record
 from imupipe.recording.simulator import VirtualADIS16364
-from imupipe.testing.busy_bag import adis_stream, imu_stream, other_streams, write_rosbag2
+from imupipe.testing.busy_bag import (
+    Stream,
+    adis_stream,
+    imu_stream,
+    other_streams,
+    write_rosbag2,
+)
+from imupipe.testing.ros_cdr import temperature_payloads
 
 IMU_TOPIC = "/imu/data"
 
@@ -56,11 +77,27 @@ def iter_messages(path: Path, topic: str = IMU_TOPIC) -> int:
     return count
 
 
-def any_reader(bag: Path) -> int:
+def inflate_only(path: Path) -> int:
+    """Decompress every zstd chunk of the file (found through its chunk index) and nothing
+    else; returns the chunks."""
+    count = 0
+    inflater = zstandard.ZstdDecompressor()
+    with open(path, "rb") as f:
+        for index in make_reader(f).get_summary().chunk_indexes:
+            if index.compression != "zstd":
+                continue
+            f.seek(index.chunk_start_offset + 1 + 8)  # past the record's opcode and length
+            chunk = Chunk.read(ReadDataStream(f))
+            inflater.decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+            count += 1
+    return count
+
+
+def any_reader(bag: Path, topic: str = IMU_TOPIC) -> int:
     """IMU messages through rosbags' AnyReader, deserialised, the six axes read out."""
     count = 0
     with AnyReader([bag]) as reader:
-        connections = [c for c in reader.connections if c.topic == IMU_TOPIC]
+        connections = [c for c in reader.connections if c.topic == topic]
         for connection, _, raw in reader.messages(connections=connections):
             msg = reader.deserialize(raw, connection.msgtype)
             w, a = msg.angular_velocity, msg.linear_acceleration
@@ -110,10 +147,15 @@ def bench(
     size_mb = mcap_file.stat().st_size / 1e6
     print(f"\n{name}: {n} IMU messages, file {size_mb:.0f} MB")
     print(line("imupipe decode", ours, n))
+    inflate, chunks = timed(lambda: inflate_only(mcap_file))
+    if chunks:
+        print(
+            line("zstd decompression", inflate, n) + f" ({inflate.cpu / ours.cpu:.0%} of ours, CPU)"
+        )
     print(line("mcap iter_messages", base, n))
     print(ratio("iter_messages", base, ours))
     if rosbags:
-        anyr, count = timed(lambda: any_reader(bag))
+        anyr, count = timed(lambda: any_reader(bag, topic))
         assert count == n, (count, n)
         print(line("rosbags AnyReader", anyr, n))
         print(ratio("AnyReader", anyr, ours))
@@ -126,24 +168,39 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--analyze", action="store_true", help="also time imupipe analyze")
     parser.add_argument(
+        "--imu-temp-hours",
+        type=float,
+        default=0.0,
+        help="also a bag of Imu at 100 Hz and Temperature at 10 Hz of this length",
+    )
+    parser.add_argument(
         "--recorder-hours",
         type=float,
         default=0.0,
         help="also our recorder's own file (ADIS frames alone) of this length at --imu-rate",
     )
+    parser.add_argument("--bag", type=Path, action="append", default=[], help="a rosbag2 dir")
+    parser.add_argument("--topic", default=IMU_TOPIC, help="the IMU topic of --bag")
     args = parser.parse_args()
+    for bag in args.bag:
+        mcap_file = next(iter(sorted(bag.glob("*.mcap"))))
+        bench(str(bag), bag, mcap_file, args.repeat, rosbags=True, topic=args.topic)
+    if args.minutes <= 0:
+        return
     seconds = args.minutes * 60
     with tempfile.TemporaryDirectory() as tmp:
         imu = imu_stream(IMU_TOPIC, seconds, args.imu_rate, seed=1, awkward=False)
+        busy = [imu, *other_streams(seconds, camera=False, seed=2)]
         cases = {
-            "busy": [imu, *other_streams(seconds, camera=False, seed=2)],
-            "busy+camera": [imu, *other_streams(seconds, camera=True, seed=2)],
+            "busy": (busy, "zstd"),
+            "busy+camera": ([imu, *other_streams(seconds, camera=True, seed=2)], "zstd"),
+            "busy, no compression": (busy, ""),
         }
-        print(f"{args.minutes:g} min, IMU at {args.imu_rate:g} Hz, zstd chunks of 1 MiB")
-        for name, streams in cases.items():
+        print(f"{args.minutes:g} min, IMU at {args.imu_rate:g} Hz, chunks of 1 MiB")
+        for name, (streams, compression) in cases.items():
             bag = Path(tmp) / name
             start = time.perf_counter()
-            mcap_file = write_rosbag2(bag, streams)
+            mcap_file = write_rosbag2(bag, streams, compression=compression)
             print(f"\n({name} written by the mcap library in {time.perf_counter() - start:.0f} s)")
             bench(name, bag, mcap_file, args.repeat, rosbags=True)
             if name == "busy" and args.analyze:
@@ -152,7 +209,7 @@ def main() -> None:
                 subprocess.run([*cmd, str(Path(tmp) / "out")], check=True)
                 whole = time.perf_counter() - start
                 print(f"  whole imupipe analyze (decode..rrd): {whole:.2f} s")
-        del cases
+        del cases, busy, imu
         adis = [
             adis_stream(IMU_TOPIC, seconds, args.imu_rate, seed=3),
             other_streams(seconds, False, 2)[0],
@@ -161,6 +218,17 @@ def main() -> None:
         meta = {METADATA_NAME: DeviceConfig().to_metadata()}
         mcap_file = write_rosbag2(bag, adis, metadata=meta)
         bench("adis+tf", bag, mcap_file, args.repeat, rosbags=False)
+        if args.imu_temp_hours:
+            hours = args.imu_temp_hours
+            bag = Path(tmp) / "imu+temperature"
+            imu = imu_stream(IMU_TOPIC, hours * 3600, 100, seed=4, awkward=False)
+            t = imu.log_time[::10]  # 10 Hz, as the IMU's clock
+            celsius = 25 + np.random.default_rng(5).normal(0, 0.1, len(t))
+            payloads = list(temperature_payloads(t, celsius, frame_id="imu_link"))
+            temperature = Stream("/imu/temperature", TEMPERATURE_SCHEMA, payloads, t)
+            mcap_file = write_rosbag2(bag, [imu, temperature])
+            del imu, temperature
+            bench(f"Imu 100 Hz + Temperature 10 Hz, {hours:g} h", bag, mcap_file, 1, False)
         if args.recorder_hours:
             path = Path(tmp) / "recorder.mcap"
             n = round(args.recorder_hours * 3600 * args.imu_rate)

@@ -29,6 +29,7 @@ columns (in memory, or appended to files in a spill directory), and
 
 from __future__ import annotations
 
+import mmap
 import os
 import re
 from collections import defaultdict
@@ -44,8 +45,8 @@ from mcap.records import Channel, Schema
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
 from imupipe.errors import InputError
-from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, McapScanner, MessageBatch
-from imupipe.io.mcap_walk import gather
+from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, McapScanner
+from imupipe.io.mcap_walk import CDR_HEAD, CdrLayout
 from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
 from imupipe.vocab import AXES
 
@@ -55,6 +56,15 @@ TEMPERATURE_SCHEMA = "sensor_msgs/msg/Temperature"
 _IMU_TAIL = 8 * (4 + 9 + 3 + 9 + 3 + 9)  # orientation..linear_acceleration_covariance, bytes
 _IMU_GYRO = 8 * (4 + 9)  # offset of angular_velocity within the tail
 _IMU_ACCEL = 8 * (4 + 9 + 3 + 9)
+LAYOUTS = {
+    "adis16364": CdrLayout(4, TAIL_SIZE, ((0, TAIL_SIZE),)),
+    "imu": CdrLayout(8, _IMU_TAIL, ((_IMU_GYRO, 24), (_IMU_ACCEL, 24))),  # gyro @0, accel @24
+    "temperature": CdrLayout(8, 16, ((0, 8),)),
+}
+"""By kind of channel, what the scan copies of each message (:mod:`imupipe.io.mcap_walk`):
+the header, then for our frames every field after it (``Adis16364Frame.msg``, aligned to 4),
+for ``Imu`` angular_velocity and linear_acceleration (3 float64 each, fields aligned to 8), for
+``Temperature`` the temperature (float64; the variance follows)."""
 
 
 DECODED_SCHEMA = pl.Schema(
@@ -90,107 +100,84 @@ class ImuRecording:
     temperature_topic: str | None = None
 
 
-_CDR_HEAD = 16
-"""Payload bytes up to the frame_id characters: encapsulation (4), header.stamp sec i32 and
-nanosec u32, frame_id length u32."""
-
-
 @dataclass(frozen=True)
 class _CdrMessages:
-    """Well-formed little-endian CDR messages of one channel: the bytes holding them, each one's
-    first :data:`_CDR_HEAD` bytes and where its fields after the header start."""
+    """Well-formed little-endian CDR messages of one channel from one chunk: per message, its
+    :data:`CDR_HEAD` header bytes then the fields of its :class:`CdrLayout`."""
 
-    data: np.ndarray
-    head: np.ndarray  # (n, 16) uint8
-    tail: np.ndarray  # (n,) int64: byte of ``data`` where the fields after the header start
+    rows: np.ndarray  # (n, layout.width) uint8
     log_time: np.ndarray  # (n,) int64, ns
 
     def __len__(self) -> int:
-        return len(self.tail)
+        return len(self.rows)
 
     def stamps(self) -> np.ndarray:
         """header.stamp (sec i32 @4, nanosec u32 @8 of the payload) → ns, int64."""
-        sec = self.head[:, 4:8].view("<i4")[:, 0].astype(np.int64)
-        return sec * 1_000_000_000 + self.head[:, 8:12].view("<u4")[:, 0]
+        sec = self.rows[:, 4:8].view("<i4")[:, 0].astype(np.int64)
+        return sec * 1_000_000_000 + self.rows[:, 8:12].view("<u4")[:, 0]
 
-    def f64(self, offset: int, count: int) -> np.ndarray:
-        """``(n, count)`` float64 from byte ``offset`` of the fields after the header."""
-        return gather(self.data, self.tail + offset, 8 * count, "<f8")
-
-    def tail_bytes(self, size: int) -> np.ndarray:
-        """The first ``size`` bytes after the header, ``(n, size)`` uint8."""
-        return gather(self.data, self.tail, size)
+    def f64(self, field: int, count: int) -> np.ndarray:
+        """``(n, count)`` float64 from byte ``field`` of the layout's fields (as copied)."""
+        return self.rows[:, CDR_HEAD + field : CDR_HEAD + field + 8 * count].view("<f8")
 
 
-def _cdr_messages(batch: MessageBatch, alignment: int, tail: int) -> tuple[_CdrMessages, int]:
-    """The batch's well-formed messages, and how many are not: a well-formed payload is
-    little-endian CDR whose header's frame_id length (u32 at payload byte 12, NUL included) puts
-    the ``alignment``-aligned fields after it (alignment counted from the end of the 4-byte
-    encapsulation), ``tail`` bytes, exactly at the payload's end.  Anything else is malformed for
-    the schema and cannot be decoded.  The offsets are computed per message: the frame_id may
-    change length from one message to the next."""
-    offset, size, log_time = batch.offset, batch.size, batch.log_time
-    if not (long_enough := size >= _CDR_HEAD).all():
-        offset, size, log_time = offset[long_enough], size[long_enough], log_time[long_enough]
-    head = gather(batch.data, offset, _CDR_HEAD)
-    fid_len = head[:, 12:16].view("<u4")[:, 0].astype(np.int64)
-    start = 4 + (12 + fid_len + alignment - 1) // alignment * alignment
-    ok = (head[:, 0] == 0) & (head[:, 1] == 1) & (fid_len >= 1) & (start + tail == size)
-    if not ok.all():
-        head, offset, start, log_time = head[ok], offset[ok], start[ok], log_time[ok]
-    messages = _CdrMessages(batch.data, head, offset + start, log_time.astype(np.int64))
-    return messages, len(batch) - len(messages)
+_DECODE_ROWS = 1 << 15
+_DECODE_BATCHES = 16
+"""Messages of a topic decoded at once: up to :data:`_DECODE_ROWS` messages or the batches of
+:data:`_DECODE_BATCHES` chunks are joined (~2 MB of Imu rows) so that the numpy calls per
+batch do not add up to more than the copying (measured: 1/3 of the decode's main-thread CPU
+on a busy bag when each chunk's ~1700 Imu rows were decoded alone).  A batch's rows are a
+view of all the rows made from its chunk, which the batches of a sparse topic keep alive: so
+few batches at a time, not a sparse topic's whole file."""
 
 
-_BLOCK_BYTES = 32 << 20
-"""Bytes of one block a column is collected in: above glibc's largest dynamic mmap threshold
-(32 MiB on 64-bit, mallopt(3) M_MMAP_THRESHOLD), so every block is a mapping of its own whose
-untouched rows cost no memory and which returns to the OS when freed.  Collecting the runs'
-arrays themselves and concatenating them peaks at twice the column: a batch holds one MCAP chunk's
-messages (~2000 Imu messages in the 768 KiB chunks of the mcap C++ writer's DefaultChunkSize,
-which rosbag2 uses: 16 kB a column), such small arrays live on the C heap, and heap memory
-freed between live allocations stays resident (measured: 400 MB of 20 kB parts joined → RSS
-0.43 → 0.83 GB)."""
+_FIRST_MAP_BYTES = 32 << 20
+"""Bytes first reserved for a column (virtual: only the pages written cost memory)."""
 
 
 class _Column:
-    """One decoded column, collected batch by batch into :data:`_BLOCK_BYTES` blocks."""
+    """One decoded column, collected batch by batch into one private anonymous mapping
+    (mmap(2)) that doubles when full by mremap(2), which moves pages without copying them.
+
+    The column is then one array without ever being joined: no copy, no second column at the
+    peak, and its untouched tail costs no memory.  Its pages are 4 KiB ones: numpy asks for
+    transparent huge pages for arrays of 4 MB or more (madvise(2) MADV_HUGEPAGE), and where
+    the kernel compacts memory on such faults (``/sys/kernel/mm/transparent_hugepage/defrag``:
+    madvise) filling them stalled on a loaded machine (measured, busy bag: decode 2.5-2.8 s wall
+    with numpy blocks, 0.8-0.9 s with these).  Collecting the batches' arrays and concatenating
+    them instead peaks at twice the column, and small arrays freed between live ones stay
+    resident on the C heap (measured: 400 MB of 20 kB parts joined → RSS 0.43 → 0.83 GB)."""
 
     def __init__(self) -> None:
-        self.blocks: list[np.ndarray] = []
-        self.used = 0  # rows filled in the last block
+        self.map: mmap.mmap | None = None
+        self.dtype = np.dtype(np.float64)
+        self.row_shape: tuple[int, ...] = ()
         self.rows = 0
+
+    def _rows(self, start: int, count: int) -> np.ndarray:
+        """Rows ``start`` to ``start + count`` of the mapping, as an array (a view: the mapping
+        cannot grow while it lives)."""
+        per_row = int(np.prod(self.row_shape, dtype=np.int64))
+        at = start * per_row * self.dtype.itemsize
+        view = np.frombuffer(self.map, self.dtype, count * per_row, at)
+        return view.reshape(count, *self.row_shape)
 
     def add(self, v: np.ndarray) -> None:
         """Append the rows of ``v`` (same dtype and row shape on every call)."""
-        done = 0
-        while done < len(v):
-            if not self.blocks or self.used == len(self.blocks[-1]):
-                rows = max(_BLOCK_BYTES // max(v[:1].nbytes, 1), 1)
-                self.blocks.append(np.empty((rows, *v.shape[1:]), v.dtype))
-                self.used = 0
-            block = self.blocks[-1]
-            k = min(len(v) - done, len(block) - self.used)
-            block[self.used : self.used + k] = v[done : done + k]
-            self.used += k
-            done += k
+        if self.map is None:
+            self.dtype, self.row_shape = v.dtype, v.shape[1:]
+            self.map = mmap.mmap(-1, _FIRST_MAP_BYTES, flags=mmap.MAP_PRIVATE)
+        end = (self.rows + len(v)) * (v[:1].nbytes if len(v) else 0)
+        if end > len(self.map):
+            self.map.resize(max(end, 2 * len(self.map)))
+        self._rows(self.rows, len(v))[:] = v
         self.rows += len(v)
 
     def join(self) -> np.ndarray:
-        """All rows as one array, peaking at the column plus one block: a single block is
-        returned as it is (a view of its filled rows), several are copied into an empty
-        array (its pages are committed as they are written) and freed one by one."""
-        if len(self.blocks) == 1:
-            return self.blocks.pop()[: self.used]
-        out = np.empty((self.rows, *self.blocks[0].shape[1:]), self.blocks[0].dtype)
-        start = 0
-        self.blocks.reverse()
-        while self.blocks:
-            block = self.blocks.pop()
-            k = min(len(block), self.rows - start)
-            out[start : start + k] = block[:k]
-            start += k
-        return out
+        """All rows as one array (the column leaves: call once)."""
+        rows = self._rows(0, self.rows)
+        self.map = None  # the array keeps the mapping alive
+        return rows
 
 
 class _SpilledColumn:
@@ -237,9 +224,9 @@ class _Steps:
     def add(self, x: np.ndarray) -> None:
         if len(x):
             first_step_bad = self.last is not None and x[0] <= self.last
-            self.count += int(first_step_bad) + int(np.count_nonzero(np.diff(x) <= 0))
+            self.count += int(first_step_bad) + int(np.count_nonzero(x[1:] <= x[:-1]))
             self.last = int(x[-1])
-            self.nonzero |= bool(np.any(x))
+            self.nonzero = self.nonzero or bool(x.any())
 
 
 _TIMES = ("stamp_ns", "log_time_ns")
@@ -293,7 +280,7 @@ def _decode_adis(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None)
     The burst words are decoded batch by batch and kept as integer counts (an axis costs 2 bytes
     a frame until :func:`_adis_frame` scales it): the (n, 11) words of a whole recording are
     never held.  Stamps are kept only for ``t_s`` / ``stamp_ns``."""
-    block = decode_frames(np.hstack([m.head, m.tail_bytes(TAIL_SIZE)]))
+    block = decode_frames(m.rows)
     counts, new_data, alarm = adis.decode_burst(block.burst)
 
     def wanted(*names: str) -> bool:
@@ -327,25 +314,16 @@ def _decode_imu(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) 
     A subset keeps the stamps only for ``t_s`` / ``stamp_ns`` / ``temp_c`` (interpolated on the
     stamps), each axis only when named, and ``nonfinite`` (any axis NaN/inf, 1 byte per frame)
     instead of the axes for conditioning."""
-    if columns is None:
-        out.add(
-            stamp_ns=m.stamps(),
-            log_time_ns=m.log_time,
-            gyro=m.f64(_IMU_GYRO, 3),
-            accel=m.f64(_IMU_ACCEL, 3),
-        )
-        return
-    if columns & {"t_s", "stamp_ns", "temp_c"}:
+    every = columns is None
+    if every or columns & {"t_s", "stamp_ns", "temp_c"}:
         out.add(stamp_ns=m.stamps())
-    if "t_s" in columns:
+    if every or "t_s" in columns:
         out.add(log_time_ns=m.log_time)
-    if "nonfinite" in columns:
-        gyro, accel = m.f64(_IMU_GYRO, 3), m.f64(_IMU_ACCEL, 3)
-        out.add(nonfinite=~(np.isfinite(gyro).all(axis=1) & np.isfinite(accel).all(axis=1)))
-    for i, name in enumerate(AXES):
-        if name in columns:
-            start = _IMU_GYRO + 8 * i if i < 3 else _IMU_ACCEL + 8 * (i - 3)
-            out.add(**{name: m.f64(start, 1)[:, 0]})
+    if not every and "nonfinite" in columns:
+        out.add(nonfinite=~np.isfinite(m.f64(0, 6)).all(axis=1))
+    for i, name in enumerate(AXES):  # each axis a contiguous column, as the frame holds it
+        if every or name in columns:
+            out.add(**{name: m.f64(8 * i, 1)[:, 0]})
 
 
 def _decode_temperature(m: _CdrMessages, out: _Columns) -> None:
@@ -420,11 +398,7 @@ def _imu_frame(
         out = _map_chunks(stamps, lambda s: np.interp(s.astype(np.float64), xp, fp), out)
         return pl.Series(out, nan_to_null=True)
 
-    if columns is None:
-        data = {name: cols["gyro"][:, i] for i, name in enumerate(AXES[:3])}
-        data.update({name: cols["accel"][:, i] for i, name in enumerate(AXES[3:])})
-    else:
-        data = {name: cols[name] for name in AXES if name in columns}
+    data = {name: cols[name] for name in AXES if columns is None or name in columns}
     makers = {
         "stamp_ns": lambda: cols["stamp_ns"],
         **{name: (lambda v=v: v) for name, v in data.items()},
@@ -737,16 +711,16 @@ def scan(
     files, file_warnings = bag_files(path)
     kinds = {SCHEMA_NAME: "adis16364", IMU_SCHEMA: "imu", TEMPERATURE_SCHEMA: "temperature"}
 
-    def wanted(channel: Channel, schema: Schema | None) -> bool:
+    def layout(channel: Channel, schema: Schema | None) -> CdrLayout | None:
         if schema is None or schema.name not in kinds:
-            return False
+            return None
         kind = topic_kind.setdefault(channel.topic, kinds[schema.name])
         if kind != kinds[schema.name]:  # its messages cannot share one set of columns
             raise InputError(
                 f"{path}: topic {channel.topic!r} carries two message types "
                 f"({kind} and {kinds[schema.name]}); refusing to mix them"
             )
-        return True
+        return LAYOUTS[kind]
 
     skip = frozenset({"log_time_ns"} if keep_one_time_base else ())
 
@@ -763,33 +737,44 @@ def scan(
     metadata: dict[str, dict[str, str]] = {}
     warnings: list[str] = list(file_warnings)
     done = 0
-    layouts = {  # kind: (decoder, alignment of the fields after the header, their size in bytes)
-        "adis16364": (lambda m, out: _decode_adis(m, out, columns), 4, TAIL_SIZE),
-        "imu": (lambda m, out: _decode_imu(m, out, columns), 8, _IMU_TAIL),
-        "temperature": (_decode_temperature, 8, 16),
+    decoders = {
+        "adis16364": lambda m, out: _decode_adis(m, out, columns),
+        "imu": lambda m, out: _decode_imu(m, out, columns),
+        "temperature": _decode_temperature,
     }
     malformed: dict[str, int] = defaultdict(int)
+    waiting: dict[str, list[tuple[np.ndarray, np.ndarray]]] = defaultdict(list)  # (rows, log
+    waiting_rows: dict[str, int] = defaultdict(int)  # time) of batches not decoded yet, by topic
+
+    def decode_waiting(name: str) -> None:
+        batches = waiting.pop(name)
+        waiting_rows.pop(name)
+        rows = np.concatenate([r for r, _ in batches])
+        log_time = np.concatenate([t for _, t in batches]).view(np.int64)
+        decoders[topic_kind[name]](_CdrMessages(rows, log_time), channels[name])
+
     frame_ids: dict[str, str] = {}  # the header.frame_id of each topic's first message
     for file in files:
         offset = done
         scanner = McapScanner(
             file,
-            wanted=wanted,
             progress=progress and (lambda n, o=offset: progress(o + n)),
             max_chunk_bytes=max_chunk_bytes,
         )
         report = scanner.report
-        for batch in scanner.batches():
-            channel = report.channels[batch.channel_id]
-            decoder, alignment, tail = layouts[kinds[report.schemas[channel.schema_id].name]]
-            messages, bad = _cdr_messages(batch, alignment, tail)
-            if bad:
-                malformed[channel.topic] += bad
-            if len(messages):
-                if channel.topic not in frame_ids:
-                    first = batch.data[batch.offset[0] : batch.offset[0] + batch.size[0]]
-                    frame_ids[channel.topic] = _frame_id(first)
-                decoder(messages, channels[channel.topic])
+        for batch in scanner.cdr_batches(layout):
+            name = report.channels[batch.channel_id].topic
+            if batch.bad:
+                malformed[name] += batch.bad
+            if batch.first is not None:
+                if name not in frame_ids:
+                    frame_ids[name] = _frame_id(batch.first)
+                waiting[name].append((batch.rows, batch.log_time))
+                waiting_rows[name] += len(batch)
+                if waiting_rows[name] >= _DECODE_ROWS or len(waiting[name]) >= _DECODE_BATCHES:
+                    decode_waiting(name)
+        for name in list(waiting):
+            decode_waiting(name)
         done += report.file_bytes
         _same_device(path, metadata, report.metadata, file)
         metadata.update(report.metadata)

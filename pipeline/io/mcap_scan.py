@@ -29,7 +29,7 @@ import io
 import itertools
 import os
 import struct
-import zlib
+import threading
 from collections import deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -40,13 +40,24 @@ from typing import BinaryIO
 import lz4.frame
 import numpy as np
 import zstandard
+from isal.isal_zlib import crc32
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 
 from imupipe.errors import InputError, NotMcapError
-from imupipe.io.mcap_walk import MESSAGE_HEAD, RECORD_HEAD, MessageIndex, gather, index_messages
+from imupipe.io.mcap_walk import (
+    MESSAGE_HEAD,
+    RECORD_HEAD,
+    CdrLayout,
+    CdrRows,
+    CdrTable,
+    MessageIndex,
+    cdr_rows,
+    gather,
+    index_messages,
+)
 
 MAGIC = b"\x89MCAP0\r\n"
 _CHUNK_FIXED = 8 + 8 + 8  # message_start_time, message_end_time, uncompressed_size
@@ -119,6 +130,30 @@ class MessageBatch:
         for a, b in itertools.pairwise(cuts):
             payloads = gather(self.data, self.offset[a:b], int(self.size[a]))
             yield MessageRun(self.channel_id, self.log_time[a:b], payloads)
+
+
+@dataclass(frozen=True)
+class CdrBatch:
+    """Messages of one channel from one chunk (or one block of top-level records), in file
+    order, as rows of their CDR header and the fields of the channel's :class:`CdrLayout`
+    (:func:`imupipe.io.mcap_walk.cdr_rows`).
+
+    Attributes:
+        channel_id: the MCAP channel.
+        log_time: ns since the epoch (uint64, ``(n,)``) of the well-formed messages.
+        rows: ``(n, layout.width)`` uint8, one per well-formed message.
+        bad: messages of the batch that are not well-formed for the layout (not in ``rows``).
+        first: the payload of the first well-formed message (None if there is none).
+    """
+
+    channel_id: int
+    log_time: np.ndarray
+    rows: np.ndarray
+    bad: int
+    first: np.ndarray | None
+
+    def __len__(self) -> int:
+        return len(self.rows)
 
 
 @dataclass(frozen=True)
@@ -245,6 +280,17 @@ class ScanReport:
         return out
 
 
+_THREAD = threading.local()
+
+
+def _zstd() -> zstandard.ZstdDecompressor:
+    """This thread's zstd decompressor (a decompressor is not shared between threads; making
+    one per chunk cost ~20 % of the decompression)."""
+    if not hasattr(_THREAD, "zstd"):
+        _THREAD.zstd = zstandard.ZstdDecompressor()
+    return _THREAD.zstd
+
+
 def _decompress(chunk: Chunk) -> bytes:
     """The chunk's records, inflated to at most the ``uncompressed_size`` its header declares
     (a bomb cannot grow past the size checked against the budget before this is called).
@@ -262,7 +308,7 @@ def _decompress(chunk: Chunk) -> bytes:
         framed = zstandard.frame_content_size(chunk.data)  # -1: not in the frame header
         if framed not in (-1, size):  # zstandard allocates the frame's size, not the cap
             raise ValueError(f"its zstd frame declares {framed} bytes, its header {size}")
-        return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=size)
+        return _zstd().decompress(chunk.data, max_output_size=size)
     if chunk.compression == "lz4":
         inflater = lz4.frame.LZ4FrameDecompressor()
         data = inflater.decompress(chunk.data, max_length=size)
@@ -299,20 +345,38 @@ def _parse_chunk(body: bytes) -> Chunk:
     )
 
 
-def _unpack(body: bytes) -> tuple[Chunk, np.ndarray, str, MessageIndex | None]:
-    """Parse a Chunk record, decompress it, check its CRC and index its leading Message
-    records: (chunk, records, reason, index), the reason why it cannot be read (empty if it
-    can; then no index)."""
+@dataclass(frozen=True)
+class _Unpacked:
+    """A Chunk record parsed, decompressed, CRC-checked and its leading Message records
+    indexed (and, for :meth:`McapScanner.cdr_batches`, their rows made)."""
+
+    chunk: Chunk
+    data: np.ndarray
+    reason: str
+    """Why the chunk cannot be read (empty if it can; else no index)."""
+    index: MessageIndex | None = None
+    rows: CdrRows | None = None
+    version: int = 0
+    """:attr:`McapScanner._redefined` when the rows were made (a channel declared again since
+    makes them stale)."""
+
+
+def _unpack(body: bytes, table: CdrTable | None = None, version: int = 0) -> _Unpacked:
+    """Parse a Chunk record, decompress it, check its CRC, index its leading Message records
+    and, with a ``table``, make their rows."""
     chunk = _parse_chunk(body)
     try:
         data = _decompress(chunk)
     except Exception as exc:  # each codec raises its own error types
         reason = f"decompression failed: {str(exc) or type(exc).__name__}"
-        return chunk, np.empty(0, np.uint8), reason, None
-    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
-        return chunk, np.empty(0, np.uint8), "CRC mismatch", None
+        return _Unpacked(chunk, np.empty(0, np.uint8), reason)
+    if chunk.uncompressed_crc and crc32(data) != chunk.uncompressed_crc:
+        return _Unpacked(chunk, np.empty(0, np.uint8), "CRC mismatch")
     buf = np.frombuffer(data, np.uint8)
-    return chunk, buf, "", index_messages(buf)
+    buf.flags.writeable = False  # an uncompressed chunk's bytes are writable: one compiled type
+    index = index_messages(buf)
+    rows = None if table is None else cdr_rows(buf, index, table, stop_at_unknown=True)
+    return _Unpacked(chunk, buf, "", index, rows, version)
 
 
 def _parse(record_type, body: bytes, length: int | None = None):
@@ -348,11 +412,21 @@ class McapScanner:
         self._progress = progress or (lambda n: None)
         self._cut_head: bytes | None = None  # fixed fields of a chunk cut off by the file's end
         self._block_bytes = MESSAGE_BLOCK[0]
+        self._layout: Callable[[Channel, Schema | None], CdrLayout | None] | None = None
+        self._table = CdrTable()
+        self._ahead: CdrTable | None = None  # the table as chunks read ahead see it (a copy)
+        self._redefined = 0  # channels declared again with another layout (or none)
 
     def _add_channel(self, channel: Channel) -> None:
         self.report.channels[channel.id] = channel
-        wanted = self._wanted(channel, self.report.schemas.get(channel.schema_id))
-        self._wanted_ids[channel.id] = bool(wanted)
+        schema = self.report.schemas.get(channel.schema_id)
+        if self._layout is None:
+            self._wanted_ids[channel.id] = bool(self._wanted(channel, schema))
+            return
+        layout = self._layout(channel, schema)
+        self._redefined += self._table.set(channel.id, layout)
+        self._ahead = None
+        self._wanted_ids[channel.id] = layout is not None
 
     def runs(self) -> Iterator[MessageRun]:
         """The file's messages as runs of equal payload size, in file order (the payloads are
@@ -363,12 +437,33 @@ class McapScanner:
     def batches(self) -> Iterator[MessageBatch]:
         """The wanted channels' messages, one batch per channel and chunk, in file order;
         chunks are unpacked a few records ahead."""
+        return self._scan()
+
+    def cdr_batches(
+        self, layout: Callable[[Channel, Schema | None], CdrLayout | None]
+    ) -> Iterator[CdrBatch]:
+        """The messages of the channels ``layout`` gives a :class:`CdrLayout` for (instead of
+        ``wanted``), one batch of rows per channel and chunk, in file order.  A chunk's rows are
+        made on the unpack thread with the channels known when it was read ahead; the messages
+        of a channel declared after that are made when the chunk is reached."""
+        self._layout = layout
+        return self._scan()
+
+    def _job(self, body: bytes) -> tuple:
+        """The arguments of the :func:`_unpack` job of a chunk read ahead."""
+        if self._layout is None:
+            return (body,)
+        if self._ahead is None:
+            self._ahead = self._table.copy()
+        return body, self._ahead, self._redefined
+
+    def _scan(self) -> Iterator:
         with ThreadPoolExecutor(UNPACK_THREADS, thread_name_prefix="mcap-unpack") as pool:
             pending: deque[tuple[int, bytes | _Block | Future, int]] = deque()
             for opcode, body, length in self._records():
-                pending.append(
-                    (opcode, pool.submit(_unpack, body) if opcode == Opcode.CHUNK else body, length)
-                )
+                if opcode == Opcode.CHUNK:
+                    body = pool.submit(_unpack, *self._job(body))
+                pending.append((opcode, body, length))
                 if len(pending) > PREFETCH_RECORDS:
                     yield from self._record(*pending.popleft())
             while pending:
@@ -414,8 +509,9 @@ class McapScanner:
                     head = f.read(_CHUNK_FIXED)
                     if self._too_large(head, length):
                         f.seek(length - _CHUNK_FIXED, os.SEEK_CUR)
-                    else:
-                        yield opcode, head + f.read(length - _CHUNK_FIXED), length
+                    else:  # read whole: joining head and rest would copy the chunk again
+                        f.seek(-_CHUNK_FIXED, os.SEEK_CUR)
+                        yield opcode, f.read(length), length
                 elif opcode in _PARSED and length <= report.max_chunk_bytes:
                     yield opcode, f.read(length), length
                 else:
@@ -481,9 +577,7 @@ class McapScanner:
             lost = LostChunk(*struct.unpack("<QQQ", head), "cut off by the end of the file")
         self.report.bad_chunks.append(lost)
 
-    def _record(
-        self, opcode: int, body: bytes | _Block | Future, length: int
-    ) -> Iterator[MessageBatch]:
+    def _record(self, opcode: int, body: bytes | _Block | Future, length: int) -> Iterator:
         """Parse one record (a chunk's body may be the :func:`_unpack` job already submitted);
         a record whose fields do not parse is counted and skipped."""
         try:
@@ -491,9 +585,7 @@ class McapScanner:
         except _MALFORMED:
             self._bad_record(opcode)
 
-    def _parsed_record(
-        self, opcode: int, body: bytes | _Block | Future, length: int
-    ) -> Iterator[MessageBatch]:
+    def _parsed_record(self, opcode: int, body: bytes | _Block | Future, length: int) -> Iterator:
         report = self.report
         if opcode == Opcode.SCHEMA:
             schema = _parse(Schema, body)
@@ -521,23 +613,30 @@ class McapScanner:
             )
         elif opcode == Opcode.CHUNK:
             report.chunks += 1
-            chunk, data, reason, index = (
-                body.result() if isinstance(body, Future) else _unpack(body)
-            )
-            if reason:
+            job = body.result() if isinstance(body, Future) else _unpack(*self._job(body))
+            chunk = job.chunk
+            if job.reason:
                 report.bad_chunks.append(
                     LostChunk(
                         chunk.message_start_time,
                         chunk.message_end_time,
                         chunk.uncompressed_size,
-                        reason,
+                        job.reason,
                     )
                 )
                 return
-            yield from self._chunk_batches(data, chunk, index)
+            rows = job.rows if job.version == self._redefined else None
+            yield from self._chunk_batches(job.data, chunk, job.index, rows)
 
-    def _batches(self, data: np.ndarray, index: MessageIndex) -> Iterator[MessageBatch]:
-        """The indexed messages of wanted channels, one batch per channel."""
+    def _batches(
+        self, data: np.ndarray, index: MessageIndex, rows: CdrRows | None = None
+    ) -> Iterator:
+        """The indexed messages of wanted channels, one batch per channel: a
+        :class:`MessageBatch`, or for :meth:`cdr_batches` a :class:`CdrBatch` (``rows``: those
+        made ahead, if still valid)."""
+        if self._layout is not None:
+            yield from self._cdr_batches(data, index, rows)
+            return
         channel = index.channel
         wanted = self._wanted_ids[channel]
         count = int(np.count_nonzero(wanted))
@@ -552,17 +651,45 @@ class McapScanner:
             sel = channel == cid
             yield MessageBatch(cid, index.log_time[sel], data, index.offset[sel], index.size[sel])
 
+    def _cdr_batches(
+        self, data: np.ndarray, index: MessageIndex, rows: CdrRows | None
+    ) -> Iterator[CdrBatch]:
+        """The :class:`CdrBatch` of each slot with messages in ``index``; rows made ahead cover
+        the index up to the first message of a channel then unknown, the rest is made now."""
+        done = 0
+        while done < len(index):
+            part = index.since(done)
+            if rows is None:
+                rows = cdr_rows(data, part, self._table, stop_at_unknown=False)
+            for s in np.flatnonzero(rows.good + rows.bad).tolist():
+                first = int(rows.first[s])
+                payload = None
+                if first >= 0:
+                    at = int(part.offset[first])
+                    payload = data[at : at + int(part.size[first])]
+                self.report.messages += int(rows.good[s] + rows.bad[s])
+                yield CdrBatch(
+                    self._table.channel_ids[s],
+                    rows.log_time[s],
+                    rows.rows[s],
+                    int(rows.bad[s]),
+                    payload,
+                )
+            done += rows.used
+            rows = None
+
     def _chunk_batches(
-        self, buf: np.ndarray, chunk: Chunk, index: MessageIndex
-    ) -> Iterator[MessageBatch]:
-        """The batches of a decompressed chunk whose leading Message records are ``index``;
-        a Schema or Channel record among them is parsed where it stands and the walk resumes
-        after it."""
+        self, buf: np.ndarray, chunk: Chunk, index: MessageIndex, rows: CdrRows | None = None
+    ) -> Iterator:
+        """The batches of a decompressed chunk whose leading Message records are ``index``
+        (``rows``: their rows made ahead, for :meth:`cdr_batches`); a Schema or Channel record
+        among them is parsed where it stands and the walk resumes after it."""
         report, end = self.report, len(buf)
         while True:
             report.message_records += len(index)
             report.message_record_bytes += int(index.size.sum()) + MESSAGE_HEAD * len(index)
-            yield from self._batches(buf, index)
+            yield from self._batches(buf, index, rows)
+            rows = None
             pos = index.stop
             if end - pos < RECORD_HEAD:
                 return

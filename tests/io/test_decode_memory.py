@@ -73,8 +73,10 @@ def status(key):
 
 dec._CHUNK = 1 << 16  # temporaries of 0.5 MB: the fixed costs stay small next to 24 MB columns
 pl.repeat(None, 1, dtype=pl.UInt32, eager=True)  # polars' first call commits ~9 MB (once)
-dec._cdr_messages(  # so does loading the compiled walk and gather (numba, LLVM): ~40 MB, once
-    next(dec.McapScanner(Path(sys.argv[1])).batches()), 8, dec._IMU_TAIL
+next(  # so does loading the compiled walks (numba, LLVM): ~40 MB, once
+    dec.McapScanner(Path(sys.argv[1])).cdr_batches(
+        lambda c, s: dec.LAYOUTS["imu"] if s.name == dec.IMU_SCHEMA else None
+    )
 )
 release_freed_memory()  # as the spilled column source does before building a column
 with open("/proc/self/clear_refs", "w") as f:
@@ -93,7 +95,7 @@ def big_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.mark.parametrize(
     ("columns", "columns_alive"),
     [
-        ("gyro_x", 1),  # the axis, collected in blocks and returned without a joining copy
+        ("gyro_x", 1),  # the axis, collected in one growing mapping: no joining copy
         ("temp_c,supply_v", 1),  # temp_c over the stamps' buffer; supply_v a null constant
         # stamps and log time are both needed to choose the time base; t_s goes over one
         ("t_s,counter,flag_nd,flag_ea,saturated,nonfinite", 2),
@@ -131,9 +133,9 @@ SUBSETS = [
 def test_subsets_equal_the_whole_decode(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stamps_set: bool
 ) -> None:
-    """Blocks joined, t_s over the log time, temp_c over the stamps: the same values (bit for
+    """Columns grown, t_s over the log time, temp_c over the stamps: the same values (bit for
     bit), dtypes and nulls as the whole decode, on either time base."""
-    monkeypatch.setattr(dec, "_BLOCK_BYTES", 40_000)  # several blocks a column, split runs
+    monkeypatch.setattr(dec, "_FIRST_MAP_BYTES", 40_000)  # each column grows several times
     monkeypatch.setattr(dec, "_CHUNK", 3_000)  # several steps of the chunked arithmetic
     path = write_bag(tmp_path / "small.mcap", 21_500, stamps_set, nan_at=7_777)
     whole = decode(path)
@@ -160,8 +162,8 @@ def test_subsets_equal_the_whole_decode(
                 assert part.warnings == whole.warnings
 
 
-def test_column_blocks_join_like_concatenate(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(dec, "_BLOCK_BYTES", 1_000)
+def test_column_grows_and_joins_like_concatenate(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(dec, "_FIRST_MAP_BYTES", 1_000)  # grown by doubling and by a big part
     rng = np.random.default_rng(0)
     for shape, dtype in (((), np.int64), ((3,), np.float64), ((), np.bool_)):
         parts = [rng.normal(size=(k, *shape)).astype(dtype) for k in (7, 300, 0, 1, 126, 2_000)]
@@ -169,7 +171,7 @@ def test_column_blocks_join_like_concatenate(monkeypatch: pytest.MonkeyPatch) ->
         for p in parts:
             column.add(p)
         joined = column.join()
-        assert joined.dtype == dtype and not column.blocks
+        assert joined.dtype == dtype and column.map is None
         np.testing.assert_array_equal(joined, np.concatenate(parts))
 
 
@@ -178,7 +180,7 @@ def test_adis_subsets_equal_the_whole_decode(
 ):
     """ADIS16364 frames are decoded run by run into the asked columns only (integer counts,
     scaled at the end): the same values, dtypes and flags as the whole decode."""
-    monkeypatch.setattr(dec, "_BLOCK_BYTES", 40_000)
+    monkeypatch.setattr(dec, "_FIRST_MAP_BYTES", 40_000)
     path = small_recordings.adis_recording(tmp_path / "adis.mcap")
     f = decode(path).frames
     assert f["saturated"].sum() == 1 and f["flag_nd"].all()

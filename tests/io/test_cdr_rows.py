@@ -1,0 +1,71 @@
+"""The compiled rows of wanted CDR messages (:func:`imupipe.io.mcap_walk.cdr_rows`): each
+well-formed message's header and fields copied exactly, malformed ones counted, channels
+unknown to a chunk read ahead left for later, declarations repeated by a summary harmless."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+from imupipe.io.mcap_walk import SKIPPED, CdrLayout, CdrTable, cdr_rows, index_messages
+from imupipe.testing.ros_cdr import temperature_payloads
+
+TEMPERATURE = CdrLayout(8, 16, ((0, 8),))  # sensor_msgs/msg/Temperature: the °C value
+
+
+def message(channel: int, log_time: int, payload: bytes) -> bytes:
+    """An MCAP Message record (opcode 0x05, u64 length, channel u16, sequence u32, log and
+    publish time u64, data)."""
+    body = struct.pack("<HIQQ", channel, 0, log_time, log_time) + payload
+    return struct.pack("<BQ", 0x05, len(body)) + body
+
+
+def temperatures(celsius: list[float], frame_id: str) -> list[bytes]:
+    stamps = np.arange(len(celsius), dtype=np.int64) * 1_000_000_000 + 7
+    return [row.tobytes() for row in temperature_payloads(stamps, np.array(celsius), frame_id)]
+
+
+def test_rows_hold_each_wanted_message_exactly_and_stop_at_an_unknown_channel() -> None:
+    wanted = temperatures([20.5, -0.0], "imu") + temperatures([1e-310], "a_longer_frame")
+    other = temperatures([99.0], "x")[0]
+    records = [
+        message(1, 10, wanted[0]),
+        message(2, 11, other),  # skipped channel
+        message(1, 12, wanted[1][:-3]),  # cut short: malformed for the layout
+        message(1, 13, wanted[1]),
+        message(3, 14, other),  # channel 3 not declared yet
+        message(1, 15, wanted[2]),
+    ]
+    buf = np.frombuffer(b"".join(records), np.uint8)
+    index = index_messages(buf)
+    table = CdrTable()
+    table.set(1, TEMPERATURE)
+    table.set(2, None)
+    ahead = cdr_rows(buf, index, table, stop_at_unknown=True)
+    assert ahead.used == 4 and ahead.good.tolist() == [2] and ahead.bad.tolist() == [1]
+    assert ahead.first.tolist() == [0]
+    np.testing.assert_array_equal(ahead.log_time[0], [10, 13])
+    celsius = ahead.rows[0][:, 16:24].copy().view("<f8")[:, 0]
+    assert celsius.view(np.uint64).tolist() == np.array([20.5, -0.0]).view(np.uint64).tolist()
+    np.testing.assert_array_equal(
+        ahead.rows[0][:, :16], [list(wanted[0][:16]), list(wanted[1][:16])]
+    )
+
+    now = cdr_rows(buf, index, table, stop_at_unknown=False)  # channel 3: skipped now
+    assert now.used == 6 and now.good.tolist() == [3] and now.bad.tolist() == [1]
+    last = now.rows[0][2, 16:24].copy().view("<f8")[0]
+    assert last == 1e-310  # the fields after a 15-byte frame_id, aligned to 8
+
+
+def test_a_repeated_declaration_keeps_its_slot_and_a_changed_one_is_reported() -> None:
+    table = CdrTable()
+    assert table.set(4, TEMPERATURE) is False  # first declaration
+    assert table.set(4, TEMPERATURE) is False and table.layouts == [TEMPERATURE]  # summary
+    other = CdrLayout(8, 24, ((8, 8),))
+    assert table.set(4, other) is True and table.slot_of[4] == 1
+    assert table.set(4, None) is True and table.slot_of[4] == SKIPPED
+    assert table.set(5, None) is False and table.set(5, None) is False
+    snapshot = table.copy()
+    table.set(6, TEMPERATURE)
+    assert snapshot.slot_of[6] != table.slot_of[6] and len(snapshot.layouts) == 2
