@@ -387,7 +387,8 @@ class CompositeFit:
     def profile_interval(
         self, avar: np.ndarray, edf: np.ndarray, j: int, level: float = 0.95
     ) -> tuple[float, float]:
-        """Profile-likelihood interval (lo, hi) of coefficient ``j`` (lo = 0: not resolved)."""
+        """Profile-likelihood interval (lo, hi) of coefficient ``j`` (lo = 0: not resolved;
+        hi = inf: the deviance never rises past the limit, the data do not bound it)."""
         idx = self.fit_index
         x, a, nu = self.design[idx], avar[idx], edf[idx]
         others = np.delete(x, j, axis=1)
@@ -406,6 +407,8 @@ class CompositeFit:
         for _ in range(200):
             if excess(top) > 0:
                 break
+            if not np.isfinite(2.0 * top):  # the data do not bound it (e.g. a null column)
+                return lo, np.inf
             top *= 2.0
         hi = optimize.brentq(excess, best, top, xtol=1e-6 * top, rtol=1e-6)
         return lo, hi

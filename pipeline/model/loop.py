@@ -705,9 +705,8 @@ def _ramp_whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis) -> effec
     psd = noise_psd(fit, state.column_params)
     j = fit.names.index("rate_random_walk")
     k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
-    upper = effects.NoisePsd(
-        psd.white, psd.flicker, psd.cutoff_hz, max(psd.rrw, k2_hi), psd.gauss_markov
-    )
+    k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: the fitted K
+    upper = effects.NoisePsd(psd.white, psd.flicker, psd.cutoff_hz, k2, psd.gauss_markov)
     return effects.Whitener(upper, len(state.y_d), ax.dt)
 
 

@@ -236,22 +236,21 @@ def test_unreachable_scheduler_is_one_line_exit_2(tmp_path):
     assert len(proc.stderr.splitlines()) == 1
 
 
-def _worker_threads() -> tuple[int, int, str | None]:
-    import numba
-    import polars
-
-    return (
-        numba.config.NUMBA_NUM_THREADS,
-        polars.thread_pool_size(),
-        os.environ.get("OMP_NUM_THREADS"),
-    )
-
-
 def test_embedded_workers_are_single_threaded():
     """One single-threaded worker per core: numba's prange kernels, polars' pool and BLAS each
     get one thread in an embedded worker, so two workers do not fight over two cores."""
     from imupipe.fleet.cluster import fleet_client
 
+    def worker_threads() -> tuple[int, int, str | None]:  # local: pickled by value
+        import numba
+        import polars
+
+        return (
+            numba.config.NUMBA_NUM_THREADS,
+            polars.thread_pool_size(),
+            os.environ.get("OMP_NUM_THREADS"),
+        )
+
     with fleet_client(workers=1) as client:
-        (threads,) = client.run(_worker_threads).values()
+        (threads,) = client.run(worker_threads).values()
     assert threads == (1, 1, "1")
