@@ -93,46 +93,9 @@ def reports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
     }
 
 
-def schema_errors(doc: object, schema: dict, root: dict, where: str = "$") -> list[str]:
-    """Required keys, types, const/enum, items and additionalProperties of a JSON Schema subset
-    (copied from tests/test_report.py: test files do not import each other)."""
-    if "$ref" in schema:
-        schema = root["$defs"][schema["$ref"].rsplit("/", 1)[-1]]
-    types = {
-        "object": dict,
-        "array": list,
-        "string": str,
-        "number": (int, float),
-        "integer": int,
-        "null": type(None),
-    }
-    errors = []
-    if "type" in schema:
-        allowed = schema["type"] if isinstance(schema["type"], list) else [schema["type"]]
-        ok = any(isinstance(doc, types[t]) and not isinstance(doc, bool) for t in allowed)
-        if not ok:
-            return [f"{where}: {type(doc).__name__} is not {allowed}"]
-    if "const" in schema and doc != schema["const"]:
-        errors.append(f"{where}: {doc!r} != {schema['const']!r}")
-    if "enum" in schema and doc not in schema["enum"]:
-        errors.append(f"{where}: {doc!r} not in {schema['enum']}")
-    if isinstance(doc, dict):
-        errors += [f"{where}: missing {k}" for k in schema.get("required", []) if k not in doc]
-        names = schema.get("propertyNames", {}).get("enum")
-        errors += [f"{where}: key {k} not allowed" for k in doc if names and k not in names]
-        props = schema.get("properties", {})
-        extra = schema.get("additionalProperties")
-        for key, value in doc.items():
-            sub = props.get(key, extra if isinstance(extra, dict) else None)
-            if sub is not None:
-                errors += schema_errors(value, sub, root, f"{where}.{key}")
-    if isinstance(doc, list) and "items" in schema:
-        for i, value in enumerate(doc):
-            errors += schema_errors(value, schema["items"], root, f"{where}[{i}]")
-    return errors
-
-
-def test_three_axis_bump_is_found_once_with_its_start_duration_axes_and_size(reports) -> None:
+def test_three_axis_bump_is_found_once_with_its_start_duration_axes_and_size(
+    reports, schema_errors
+) -> None:
     doc = reports["bump"]
     schema = json.loads(SCHEMA.read_text())
     assert schema_errors(doc, schema, schema) == []

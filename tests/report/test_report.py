@@ -16,45 +16,6 @@ from imupipe.units import from_si, to_si
 SCHEMA = Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json"
 
 
-def schema_errors(doc: object, schema: dict, root: dict, where: str = "$") -> list[str]:
-    """Required keys, types, const/enum, items and additionalProperties of a JSON Schema subset
-    (enough for report.schema.json; jsonschema is not a dependency)."""
-    if "$ref" in schema:
-        schema = root["$defs"][schema["$ref"].rsplit("/", 1)[-1]]
-    types = {
-        "object": dict,
-        "array": list,
-        "string": str,
-        "number": (int, float),
-        "integer": int,
-        "null": type(None),
-    }
-    errors = []
-    if "type" in schema:
-        allowed = schema["type"] if isinstance(schema["type"], list) else [schema["type"]]
-        ok = any(isinstance(doc, types[t]) and not isinstance(doc, bool) for t in allowed)
-        if not ok:
-            return [f"{where}: {type(doc).__name__} is not {allowed}"]
-    if "const" in schema and doc != schema["const"]:
-        errors.append(f"{where}: {doc!r} != {schema['const']!r}")
-    if "enum" in schema and doc not in schema["enum"]:
-        errors.append(f"{where}: {doc!r} not in {schema['enum']}")
-    if isinstance(doc, dict):
-        errors += [f"{where}: missing {k}" for k in schema.get("required", []) if k not in doc]
-        names = schema.get("propertyNames", {}).get("enum")
-        errors += [f"{where}: key {k} not allowed" for k in doc if names and k not in names]
-        props = schema.get("properties", {})
-        extra = schema.get("additionalProperties")
-        for key, value in doc.items():
-            sub = props.get(key, extra if isinstance(extra, dict) else None)
-            if sub is not None:
-                errors += schema_errors(value, sub, root, f"{where}.{key}")
-    if isinstance(doc, list) and "items" in schema:
-        for i, value in enumerate(doc):
-            errors += schema_errors(value, schema["items"], root, f"{where}[{i}]")
-    return errors
-
-
 @pytest.fixture(scope="module")
 def written(
     tmp_path_factory: pytest.TempPathFactory, synthetic_result
@@ -65,7 +26,7 @@ def written(
     return result, doc, out
 
 
-def test_report_json_matches_schema_and_contract(written) -> None:
+def test_report_json_matches_schema_and_contract(written, schema_errors) -> None:
     result, doc, out = written
     schema = json.loads(SCHEMA.read_text())
     on_disk = json.loads((out / "report.json").read_text())
@@ -93,7 +54,7 @@ def test_report_json_matches_schema_and_contract(written) -> None:
     assert "model" not in on_disk["axes"]["accel_y"]
 
 
-def test_schema_check_catches_broken_reports(written) -> None:
+def test_schema_check_catches_broken_reports(written, schema_errors) -> None:
     _, doc, _ = written
     schema = json.loads(SCHEMA.read_text())
     broken = json.loads(json.dumps(doc))
