@@ -691,7 +691,9 @@ def psd_line(
     i = int(band[np.argmax(band_power)])
     i = min(max(i, 1), n // 2 - 1)
     a, b, c = np.log(spec[i - 1 - first : i + 2 - first] + 1e-300)
-    delta = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) < 0 else 0.0
+    # the vertex lies within half a bin of i only where i is a local maximum; at a band edge
+    # below a stronger neighbour outside the band, the line is i itself
+    delta = 0.5 * (a - c) / (a - 2 * b + c) if b >= max(a, c) and (a - 2 * b + c) < 0 else 0.0
     freq = (i + delta) / (n * dt)
     amp = 2 * np.sqrt(spec[i - first]) / win_sum
     noise_psd = np.median(band_power) / win_sq_sum  # per-sample variance equivalent
