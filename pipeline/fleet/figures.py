@@ -9,7 +9,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import io
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 
 import matplotlib
@@ -18,6 +19,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import polars as pl
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
 
 from imupipe.fleet.curves import UNIT_COLUMN
 from imupipe.fleet.population import TermStats, final_terms
@@ -32,21 +35,35 @@ STRIP_TERMS: tuple[tuple[str, str], ...] = (
 _TITLES = {"gyro": "Gyroscopes", "accel": "Accelerometers"}
 
 
-def adev_figure(fleet: pl.DataFrame, pop: pl.DataFrame, sensor: str, path: Path) -> Path | None:
-    """Every unit's ADEV per axis of ``sensor`` with the population median and 95 % band."""
+def _png(fig: Figure) -> bytes:
+    """The figure laid out and encoded as PNG (100 dpi), then closed."""
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=100)
+    plt.close(fig)
+    return buffer.getvalue()
+
+
+def adev_figure(fleet: pl.DataFrame, pop: pl.DataFrame, sensor: str) -> bytes | None:
+    """PNG: every unit's ADEV per axis of ``sensor`` with the population median and 95 % band
+    (None without any such axis)."""
     axes = [a for a in AXES_OF[sensor] if a in set(fleet["axis"].unique())]
     if not axes:
         return None
     fig, panels = plt.subplots(1, len(axes), figsize=(4.2 * len(axes), 4.2), squeeze=False)
     for ax, axis in zip(panels[0], axes, strict=True):
         part = fleet.filter(pl.col("axis") == axis)
-        for _, unit in part.group_by(UNIT_COLUMN, maintain_order=True):
-            ax.plot(unit["tau"], unit["adev"], color="0.55", lw=0.7, alpha=0.7)
+        curves = [
+            np.column_stack([unit["tau"], unit["adev"]])
+            for _, unit in part.group_by(UNIT_COLUMN, maintain_order=True)
+        ]  # one artist for all units: a line each costs ~0.1 s per unit to lay out and draw
+        ax.add_collection(LineCollection(curves, colors="0.55", linewidths=0.7, alpha=0.7))
         p = pop.filter(pl.col("axis") == axis)
         ax.fill_between(p["tau"], p["lo"], p["hi"], color="tab:blue", alpha=0.25, lw=0)
         ax.plot(p["tau"], p["median"], color="tab:blue", lw=2.0)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.autoscale_view()
         ax.set_title(axis)
         ax.set_xlabel("averaging time τ [s]")
         ax.grid(True, which="major", lw=0.4, alpha=0.6)
@@ -57,16 +74,12 @@ def adev_figure(fleet: pl.DataFrame, pop: pl.DataFrame, sensor: str, path: Path)
     panels[0][0].fill_between([], [], [], color="tab:blue", alpha=0.25, label="95 % of units")
     panels[0][0].legend(fontsize=7)
     fig.suptitle(f"{_TITLES[sensor]}: Allan deviation of {fleet[UNIT_COLUMN].n_unique()} units")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _png(fig)
 
 
-def terms_figure(
-    reports: Mapping[str, dict], stats: list[TermStats], sensor: str, path: Path
-) -> Path | None:
-    """Strip plots of N, B, K: each unit's interval per axis, tolerance interval, datasheet."""
+def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: str) -> bytes | None:
+    """PNG: strip plots of N, B, K, each unit's interval per axis, tolerance interval,
+    datasheet (None without any axis of ``sensor``)."""
     axes = [a for a in AXES_OF[sensor] if any(a in r["axes"] for r in reports.values())]
     if not axes:
         return None
@@ -76,6 +89,9 @@ def terms_figure(
     fig, panels = plt.subplots(1, len(STRIP_TERMS), figsize=(4.2 * len(STRIP_TERMS), 4.2))
     for ax, (term, symbol) in zip(panels, STRIP_TERMS, strict=True):
         unit = PAPER_UNIT[sensor][term]
+        # one artist per kind of point and panel: an errorbar per unit costs seconds to lay out
+        points: dict[bool, list[tuple[float, float, float, float]]] = {False: [], True: []}
+        bounds: list[tuple[float, float]] = []
         for i, axis in enumerate(axes):
             st = by_key.get((axis, term))
             if st is not None and st.tolerance is not None:
@@ -94,12 +110,19 @@ def terms_figure(
                     lo = from_si(t["lo"] if t["lo"] is not None else t["value"], unit)
                     hi = from_si(t["hi"] if t["hi"] is not None else t["value"], unit)
                     outlier = st is not None and name in st.outliers
-                    ax.errorbar(
-                        x, v, yerr=[[v - lo], [hi - v]], fmt="o", ms=3.5, capsize=2,
-                        color="tab:orange" if outlier else "k",
-                    )  # fmt: skip
+                    points[outlier].append((x, v, v - lo, hi - v))
                 elif t["hi"] is not None:  # unresolved: its upper bound
-                    ax.plot(x, from_si(t["hi"], unit), "v", color="0.5", ms=4)
+                    bounds.append((x, from_si(t["hi"], unit)))
+        for outlier, rows in points.items():
+            if rows:
+                x, v, below, above = np.array(rows).T
+                ax.errorbar(
+                    x, v, yerr=[below, above], fmt="o", ms=3.5, capsize=2,
+                    color="tab:orange" if outlier else "k",
+                )  # fmt: skip
+        if bounds:
+            x, v = np.array(bounds).T
+            ax.plot(x, v, "v", color="0.5", ms=4, ls="none")
         ax.set_xticks(range(len(axes)), axes)
         ax.set_yscale("log")
         ax.set_title(f"{symbol} [{unit}]")
@@ -114,26 +137,51 @@ def terms_figure(
         panels[0].plot([], [], "--", color="tab:red", label="datasheet")
     panels[0].legend(fontsize=7)
     fig.suptitle(f"{_TITLES[sensor]}: noise terms of {len(names)} units")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _png(fig)
 
 
-def write_fleet_figures(
-    fleet: pl.DataFrame,
-    pop: pl.DataFrame,
-    reports: Mapping[str, dict],
-    stats: list[TermStats],
-    out_dir: Path,
-) -> dict[str, Path]:
-    """Every figure that applies, into ``out_dir``; returns {caption: path}."""
-    written: dict[str, Path] = {}
+FigureJob = tuple[Callable[..., bytes | None], tuple]
+"""A figure function and its arguments; called as ``func(*args)`` wherever the mapper runs it."""
+
+Mapper = Callable[[Callable[[FigureJob], bytes | None], list[FigureJob]], Iterable[bytes | None]]
+"""Runs the figure jobs, e.g. builtin ``map`` (in this process) or a Dask client's map+gather
+(on the fleet's workers, in parallel)."""
+
+
+def draw(job: FigureJob) -> bytes | None:
+    """Run one figure job (picklable: the fleet's workers draw the figures)."""
+    func, args = job
+    return func(*args)
+
+
+def figure_jobs(
+    fleet: pl.DataFrame, pop: pl.DataFrame, reports: Mapping[str, dict], stats: list[TermStats]
+) -> list[tuple[str, str, FigureJob]]:
+    """(caption, file name, job) of every fleet figure: per sensor, the ADEV overlay and the
+    strip plots."""
+    jobs: list[tuple[str, str, FigureJob]] = []
     for sensor in ("gyro", "accel"):
-        adev = adev_figure(fleet, pop, sensor, out_dir / f"fleet_adev_{sensor}.png")
-        if adev is not None:
-            written[f"{_TITLES[sensor]}: Allan deviation of every unit"] = adev
-        strips = terms_figure(reports, stats, sensor, out_dir / f"fleet_terms_{sensor}.png")
-        if strips is not None:
-            written[f"{_TITLES[sensor]}: N, B, K per unit"] = strips
+        jobs.append((
+            f"{_TITLES[sensor]}: Allan deviation of every unit",
+            f"fleet_adev_{sensor}.png",
+            (adev_figure, (fleet, pop, sensor)),
+        ))  # fmt: skip
+        jobs.append((
+            f"{_TITLES[sensor]}: N, B, K per unit",
+            f"fleet_terms_{sensor}.png",
+            (terms_figure, (reports, stats, sensor)),
+        ))  # fmt: skip
+    return jobs
+
+
+def save_figures(
+    jobs: list[tuple[str, str, FigureJob]], pngs: Iterable[bytes | None], out_dir: Path
+) -> dict[str, Path]:
+    """Write the drawn figures (``pngs``, in the order of ``jobs``; None: not applicable) into
+    ``out_dir``; returns {caption: path}."""
+    written: dict[str, Path] = {}
+    for (caption, name, _), png in zip(jobs, pngs, strict=True):
+        if png is not None:
+            written[caption] = out_dir / name
+            written[caption].write_bytes(png)
     return written

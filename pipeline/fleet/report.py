@@ -16,6 +16,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import polars as pl
 
@@ -28,6 +29,9 @@ from imupipe.report.datasheet import Datasheet
 from imupipe.report.report import _fmt, _md_table
 from imupipe.units import PAPER_UNIT, from_si
 from imupipe.vocab import sensor_of
+
+if TYPE_CHECKING:  # matplotlib is imported only when the figures are drawn
+    from imupipe.fleet.figures import Mapper
 
 SCHEMA_VERSION = 1
 _MD_SPECIAL = re.compile(r"([\\`*_{}\[\]<>#!~])")
@@ -244,10 +248,13 @@ def write_fleet_report(
     out_dir: Path,
     datasheet: Datasheet | None = None,
     rrd: bool = True,
+    mapper: Mapper = map,
 ) -> tuple[dict, list[TermStats]]:
     """Write fleet.json, fleet.parquet, fleet.md (+ figures) and fleet.rrd into ``out_dir``;
-    returns the fleet.json document and the population statistics."""
-    from imupipe.fleet.figures import write_fleet_figures
+    returns the fleet.json document and the population statistics.  The figures are drawn by
+    ``mapper`` (:data:`imupipe.fleet.figures.Mapper`; a Dask client's map draws them on the
+    fleet's workers while this process writes the rest)."""
+    from imupipe.fleet.figures import draw, figure_jobs, save_figures
     from imupipe.fleet.rerun_view import write_fleet_rrd
 
     ok = [o for o in outcomes if o.status == "ok"]
@@ -255,11 +262,13 @@ def write_fleet_report(
     stats = population(reports, datasheet)
     fleet = fleet_frame({o.name: o.allan for o in ok})
     pop = population_curves(fleet)
+    jobs = figure_jobs(fleet, pop, reports, stats)
+    pngs = mapper(draw, [job for *_, job in jobs])
     doc = fleet_json(outcomes, stats, pop, datasheet)
     (out_dir / "fleet.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     fleet.write_parquet(out_dir / "fleet.parquet")
-    figures = write_fleet_figures(fleet, pop, reports, stats, out_dir)
-    (out_dir / "fleet.md").write_text(fleet_markdown(outcomes, stats, figures, datasheet))
     if rrd:
         write_fleet_rrd(fleet, pop, out_dir / "fleet.rrd")
+    figures = save_figures(jobs, pngs, out_dir)
+    (out_dir / "fleet.md").write_text(fleet_markdown(outcomes, stats, figures, datasheet))
     return doc, stats

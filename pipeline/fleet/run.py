@@ -14,11 +14,12 @@ from __future__ import annotations
 import shutil
 import time
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
-from distributed import as_completed
+from distributed import Client, as_completed
 
 from imupipe.analysis.analyze import AnalyzeOptions
 from imupipe.fleet.cluster import fleet_client
@@ -109,7 +110,16 @@ def run_fleet(
                     outcomes[rec.name] = _lost(rec, future.exception(), time.perf_counter() - t0)
                 future.release()
                 advance(done)
-    shutil.rmtree(out_dir / STAGING, ignore_errors=True)  # left by workers killed mid-task
-    units = [outcomes[r.name] for r in recs]
-    doc, stats = write_fleet_report(units, out_dir, sheet, rrd=options.rrd)
+        shutil.rmtree(out_dir / STAGING, ignore_errors=True)  # left by workers killed mid-task
+        units = [outcomes[r.name] for r in recs]
+        doc, stats = write_fleet_report(
+            units, out_dir, sheet, rrd=options.rrd, mapper=partial(_on_workers, client)
+        )
     return FleetResult(units, stats, doc, out_dir, time.perf_counter() - t0)
+
+
+def _on_workers(client: Client, func: Callable, jobs: list) -> Iterator:
+    """The fleet report's figures drawn on the cluster's workers, in parallel, while the
+    client writes the rest of the report: submitted now, gathered when iterated."""
+    futures = client.map(func, jobs, pure=False)
+    return (future.result() for future in futures)
