@@ -9,6 +9,8 @@ plateau σ = √(2 ln 2 / π) B = 0.6643 B.  Small SI values are compared with `
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy import integrate
@@ -253,3 +255,23 @@ def test_degrees_of_freedom_are_points_minus_parameters() -> None:
         avar = ieee952.avar_model(tau, random_walk=1e-3, rate_random_walk=1e-5)
         fit = ieee952.fit_composite(tau, avar, np.full_like(tau, 1e3), cutoff_hz=np.inf)
         assert fit.dof == want, points
+
+
+def test_profile_interval_of_a_column_the_data_do_not_bound_is_open_above() -> None:
+    """A column that is zero at every fitted τ never moves the deviance: its interval is
+    [0, inf) (hi = inf is "not bounded by the data"; the ramp whitener then falls back on the
+    fitted value), while the random-walk column of the same fit stays bounded on both sides."""
+    tau = 0.01 * 2.0 ** np.arange(12)
+    edf = np.full(tau.size, 1e3)
+    avar = 1e-6 / tau * np.random.default_rng(3).chisquare(edf) / edf
+    fit = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf)
+    null = dataclasses.replace(
+        fit,
+        names=(*fit.names, "null"),
+        coef=np.append(fit.coef, 0.0),
+        design=np.column_stack([fit.design, np.zeros(tau.size)]),
+    )
+    assert null.profile_interval(avar, edf, len(fit.names)) == (0.0, np.inf)
+    lo, hi = null.profile_interval(avar, edf, 1)  # N², the 1/τ column
+    assert 0.0 < lo < fit.coef[1] < hi < np.inf
+    assert lo < 1e-6 < hi  # the true N² (data: N = 1e-3 with gamma scatter)
