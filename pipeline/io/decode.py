@@ -44,7 +44,7 @@ from mcap.records import Channel, Schema
 
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
-from imupipe.errors import InputError
+from imupipe.errors import ConfigError, InputError
 from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, McapScanner
 from imupipe.io.mcap_walk import CDR_HEAD, CdrLayout
 from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
@@ -826,6 +826,10 @@ def scan(
             raise InputError(
                 f"{path}: unreadable '{METADATA_NAME}' metadata record ({exc!r}): scale factors "
                 "unknown"
+            ) from None
+        except ConfigError as exc:  # a register value the part does not accept
+            raise InputError(
+                f"{path}: invalid '{METADATA_NAME}' metadata record ({exc}): scale factors unknown"
             ) from None
         temperature = None
     else:

@@ -27,7 +27,7 @@ from imupipe.device.frame_schema import (
     encode_frames,
     message_definition,
 )
-from imupipe.errors import ImupipeError, InputError
+from imupipe.errors import InputError
 from imupipe.io.decode import decode, scan
 from imupipe.io.mcap_bulk import BulkWriter
 
@@ -188,9 +188,11 @@ def test_adis_frames_need_readable_scale_factors(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="without the 'adis16364' metadata record"):
         decode(write_adis(tmp_path / "a.mcap", block, meta=False))
     meta = DeviceConfig().to_metadata() | {"sens_avg": str(0x0302)}  # no gyro range 3
-    # (a ConfigError without the file's name today; the InputError "unreadable ... metadata"
-    # of the other cases would be more consistent; either is one line naming the value)
-    with pytest.raises(ImupipeError, match="SENS_AVG 0x0302 selects no valid gyro range"):
+    with pytest.raises(
+        InputError,
+        match=r"b\.mcap: invalid 'adis16364' metadata record \(SENS_AVG 0x0302 selects no valid "
+        r"gyro range\): scale factors unknown",
+    ):
         decode(write_adis(tmp_path / "b.mcap", block, meta=meta))
     meta = {k: v for k, v in DeviceConfig().to_metadata().items() if k != "smpl_prd"}
     with pytest.raises(InputError, match=r"unreadable .*'smpl_prd'.*scale factors unknown"):
