@@ -16,9 +16,11 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 import pytest
+from matplotlib.image import imread
 
 from imupipe.api import analyze, record
 from imupipe.fleet.curves import UNIT_COLUMN
+from imupipe.fleet.report import write_fleet_report
 from imupipe.fleet.run import run_fleet
 from imupipe.report.rerun_view import rerun_executable
 
@@ -114,6 +116,15 @@ def test_local_cluster_local_and_s3_units(tmp_path, s3_server):
     assert "2 recordings: 2 analysed, 0 failed." in md
     for name in ("fleet_adev_gyro.png", "fleet_terms_accel.png", "fleet.rrd"):
         assert (out / name).stat().st_size > 1000
+    # the figures were drawn on the workers: the same PNGs as drawn here, each in its own file
+    local = tmp_path / "local_report"
+    local.mkdir()
+    write_fleet_report(result.units, local, rrd=False)
+    for sensor in ("gyro", "accel"):
+        for kind in ("adev", "terms"):
+            name = f"fleet_{kind}_{sensor}.png"
+            assert (out / name).read_bytes() == (local / name).read_bytes(), name
+    assert imread(out / "fleet_adev_gyro.png").shape == (420, 1260, 4)  # 3 panels of 4.2 in
 
 
 def _wait_for(predicate, timeout_s: float, what: str):
