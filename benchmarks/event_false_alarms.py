@@ -38,8 +38,8 @@ from imupipe.recording.scenario import Scenario, Temperature
 from imupipe.vocab import AXES
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import independent_generator as ig  # noqa: E402
-from false_positive_rate import LAB_TEMPERATURE, record  # noqa: E402
+import independent_generator as ig
+from false_positive_rate import LAB_TEMPERATURE, record
 
 ALPHAS = (1e-3, 0.1)
 RATE_HZ = 100.0
