@@ -4,7 +4,9 @@ Each rule of :mod:`imupipe.model.loop` — significance (ΔBIC ≥ 10 for AVAR t
 Bonferroni-adjusted p below α = 0.001 for time-domain corrections), the hold-out (both halves /
 both segment parities must improve), the periodogram line, the flags (max |z|, the |z| > 3
 count) and the error (D/dof must fall; a slow correction's deviance may not rise by more than
-φ·χ²₁(0.95)) — gets one case that passes it and one that fails only it, and the test checks
+φ·χ²₁(0.95)), and the rule on both errors (issue 13 item 7: the time-domain deviance may not
+rise by more than χ²₁(0.95); the Allan-space or the time-domain one must fall by at least
+that) — gets one case that passes it and one that fails only it, and the test checks
 the decision a user sees: accepted or rejected, and the reason string of report.json.
 
 Three levels:
