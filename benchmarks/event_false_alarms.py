@@ -75,8 +75,10 @@ def clean_recording(source: str, seed: int, hours: float, rho: float) -> np.ndar
         common, _, _ = ig.generate(hours, RATE_HZ, seed + 1_000_000)
         for j, k in ((0, 0), (1, 0), (2, 0), (3, 3), (4, 3), (5, 3)):  # common gyro / accel
             mean = y[:, j].mean()
-            y[:, j] = mean + np.sqrt(1 - rho) * (y[:, j] - mean) + np.sqrt(rho) * (
-                common[:, k] - common[:, k].mean()
+            y[:, j] = (
+                mean
+                + np.sqrt(1 - rho) * (y[:, j] - mean)
+                + np.sqrt(rho) * (common[:, k] - common[:, k].mean())
             )
     return y
 

@@ -234,6 +234,20 @@ def test_an_avar_only_term_is_judged_on_the_allan_error_alone():
     )
 
 
+def test_a_ramp_needs_no_fall_of_either_error_but_may_not_raise_the_time_domain_one():
+    """A linear ramp is the time-domain error's nuisance and the Allan model's R term."""
+    ramp = ErrorChange(0.75, 0.74, 0.1, 0.97, 0.97, 0.0, True, False)
+    trial, _ = _with_errors(0.0, 0.0)
+    d = _decide(Trial("ramp", trial.cand, 1.0, True, None, trial.holdout, ramp))  # type: ignore[arg-type]
+    assert (d.accept, d.reason) == (True, None)
+    rises = ErrorChange(0.75, 0.74, 0.1, 0.97, 0.99, -3.9, True, False)
+    d = _decide(Trial("ramp", trial.cand, 1.0, True, None, trial.holdout, rises))  # type: ignore[arg-type]
+    assert (d.accept, d.reason) == (
+        False,
+        "the time-domain error rises (0.97 -> 0.99; deviance +3.9 > 3.84)",
+    )
+
+
 def test_error_change_is_the_allan_deviance_drop_over_phi_and_the_time_likelihood_ratio():
     old = _fit(30.0)  # D/dof 3: dispersion 3
     new = _fit(12.0)
