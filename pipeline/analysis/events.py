@@ -18,9 +18,13 @@ Detector (all on :data:`FINE_BLOCK_S` block means of each axis, spikes already r
    neighbourhood are tested (none within 8 L of either end).
 3. A window is flagged when one axis has |z| > z₁ or at least two axes have |z| > z₂.  With M
    tests (windows summed over all scales) and A axes, z₁ and z₂ are chosen so that under
-   independent Gaussian z each rule has a record-wide false-alarm probability of at most α/2
-   (Bonferroni over windows, scales and axes / axis pairs):
-   A · 2Φ̄(z₁) = α / (2M) and C(A, 2) · (2Φ̄(z₂))² = α / (2M), α = :data:`FALSE_ALARM`.
+   Gaussian z each rule has a record-wide false-alarm probability of at most α/2 (Bonferroni
+   over windows, scales and axes / axis pairs, valid under any dependence between them):
+   A · 2Φ̄(z₁) = α / (2M) and Σ_{i<j} P(|Zᵢ| > z₂, |Zⱼ| > z₂; ρᵢⱼ) = α / (2M),
+   α = :data:`FALSE_ALARM`, with ρᵢⱼ the correlation of the two axes' z measured at that scale
+   (:func:`axis_correlation`): axes that share noise (one temperature, one mechanical
+   disturbance) coincide more often, and z₂ rises.  For ρ = 0 the pair rule is
+   C(A, 2) · (2Φ̄(z₂))² = α / (2M).
 4. Flagged windows that overlap are one event.  Its start and end: the box [a, b) of fine blocks
    inside the flagged span that maximises the multi-axis box likelihood ratio
    Σ_axes (Σ_{k∈[a,b)} x_k − level)² / ((b − a) v) (v: the fine-block variance; level: the
@@ -42,7 +46,7 @@ from math import comb
 from typing import Literal
 
 import numpy as np
-from scipy import ndimage, special
+from scipy import ndimage, optimize, special
 
 from imupipe.model.effects import spike_candidate
 from imupipe.stats import robust
@@ -83,6 +87,8 @@ class EventDetector:
     z_single: tuple[float, ...]
     z_joint: tuple[float, ...]
     axes: tuple[str, ...]
+    correlation: tuple[float, ...]
+    """Largest |correlation| of an axis pair's z at each scale (:func:`axis_correlation`)."""
     false_alarm: float = FALSE_ALARM
 
     def as_dict(self) -> dict:
@@ -92,16 +98,29 @@ class EventDetector:
             "axes": list(self.axes),
             "false_alarm": self.false_alarm,
             "scales": [
-                {"window_s": s, "windows": w, "z_single_axis": z1, "z_two_axes": z2}
-                for s, w, z1, z2 in zip(
-                    self.scales_s, self.windows, self.z_single, self.z_joint, strict=True
+                {
+                    "window_s": s,
+                    "windows": w,
+                    "z_single_axis": z1,
+                    "z_two_axes": z2,
+                    "max_abs_axis_correlation": r,
+                }
+                for s, w, z1, z2, r in zip(
+                    self.scales_s,
+                    self.windows,
+                    self.z_single,
+                    self.z_joint,
+                    self.correlation,
+                    strict=True,
                 )
             ],
             "rule": (
                 "a window is an event when one axis has |z| > z_single_axis or two or more "
                 "axes have |z| > z_two_axes; each rule has a record-wide false-alarm "
                 "probability <= false_alarm / 2 (Bonferroni over the tests of all scales and "
-                "the axes / axis pairs; Student-t quantiles with the degrees of freedom of each "
+                "the axes / axis pairs; a pair's joint tail is that of a bivariate normal with "
+                "the axes' correlation measured at the scale, so correlated axes raise "
+                "z_two_axes; Student-t quantiles with the degrees of freedom of each "
                 "scale's noise estimate); an event whose level after differs from the "
                 "level before by more than z_two_axes standard errors and by more than half "
                 "its size is a step (kept), otherwise a transient (excised on every axis)"
@@ -171,19 +190,58 @@ def fine_means(y: np.ndarray, tau0: float) -> np.ndarray:
     return means
 
 
-def thresholds(tests: int, axes: int, dof: float = np.inf) -> tuple[float, float]:
+JOINT_NODES = 1024
+"""Integration nodes of :func:`joint_tail` (composite trapezoid in u = x − t)."""
+MAX_CORRELATION = 1 - 1e-9
+"""|ρ| is capped here (ρ = ±1 makes the conditional normal a step)."""
+
+
+def joint_tail(t: float, rho: np.ndarray) -> np.ndarray:
+    """P(|X| > t and |Y| > t) of a standard bivariate normal pair with correlation ``rho`` (one
+    value per pair): 2 [U(t, ρ) + U(t, −ρ)], U(t, ρ) = P(X > t, Y > t) =
+    ∫_t^∞ φ(x) Φ̄((t − ρx) / √(1 − ρ²)) dx (the conditional law of Y given X; e.g. Genz 2004,
+    Stat. Comput. 14, eq. 1), integrated over u = x − t ∈ [0, 40/t + 10] where φ(t + u) ≤
+    φ(t)·e⁻⁴⁰.  No cancellation: every term is a positive tail, so tail probabilities of 1e-15
+    keep their relative accuracy (ρ = 0 gives (2Φ̄(t))² to 0.1 %, from above)."""
+    rho = np.clip(np.abs(np.asarray(rho, dtype=float)), 0.0, MAX_CORRELATION)[:, None]
+    u = np.linspace(0.0, 40.0 / max(t, 1.0) + 10.0, JOINT_NODES)[None, :]
+    x = t + u
+    w = np.exp(-0.5 * x * x) / np.sqrt(2 * np.pi)
+    s = np.sqrt(1 - rho * rho)
+    inner = special.ndtr(-(t - rho * x) / s) + special.ndtr(-(t + rho * x) / s)
+    return 2 * np.trapezoid(w * inner, u, axis=1)
+
+
+def thresholds(
+    tests: int, axes: int, dof: float = np.inf, correlation: np.ndarray | None = None,
+    false_alarm: float = FALSE_ALARM,
+) -> tuple[float, float]:  # fmt: skip
     """(z₁, z₂) of the module docstring, step 3, as Student-t quantiles with ``dof`` degrees
     of freedom of the scale estimate (normal quantiles when ``dof`` is inf); z₂ = inf with one
-    axis."""
+    axis.
+
+    ``correlation``: the correlation of the z of each axis pair (C(A, 2) values, the order of
+    :func:`np.triu_indices`); None or all 0: independent axes.  z₂ is then the Gaussian ζ with
+    Σ_pairs P(|Zᵢ| > ζ, |Zⱼ| > ζ; ρᵢⱼ) = α / (2M) (:func:`joint_tail`), carried to the t law
+    by its one-axis tail Φ̄(ζ) — for ρ = 0 exactly the independent rule.  Bonferroni over the
+    pairs needs no independence between pairs; z₁ (a union over axes) never did."""
 
     def quantile(tail: float) -> float:  # upper quantile of t_dof (of N(0, 1): dof inf)
         return float(-special.ndtri(tail) if np.isinf(dof) else special.stdtrit(dof, 1 - tail))
 
-    share = FALSE_ALARM / (2 * max(tests, 1))
+    share = false_alarm / (2 * max(tests, 1))
     z1 = quantile(share / (2 * axes))
     if axes < 2:
         return z1, np.inf
-    return z1, quantile(np.sqrt(share / comb(axes, 2)) / 2)
+    if correlation is None or not np.any(correlation):
+        return z1, quantile(np.sqrt(share / comb(axes, 2)) / 2)
+    rho = np.asarray(correlation, dtype=float)
+
+    def excess(zeta: float) -> float:  # log of the pairs' summed tail over the share
+        return float(np.log(np.sum(joint_tail(zeta, rho)) + 1e-320) - np.log(share))
+
+    zeta = optimize.brentq(excess, 0.0, 40.0, xtol=1e-6)
+    return z1, quantile(float(special.ndtr(-zeta)))
 
 
 WINSOR_C = 3.0
@@ -212,6 +270,18 @@ def _robust_scale(r: np.ndarray) -> float:
         return sigma
     tail = robust.abs_quantile(r, 1.0 - TAIL_P) / float(-special.ndtri(TAIL_P / 2))
     return max(sigma, tail)
+
+
+def axis_correlation(z: np.ndarray) -> np.ndarray:
+    """Correlation of the z of each axis pair over the windows of one scale (C(A, 2) values in
+    :func:`np.triu_indices` order), from z clipped at ±:data:`WINSOR_C` so a few event windows
+    barely move it; 0 where an axis' z is constant."""
+    c = np.clip(z, -WINSOR_C, WINSOR_C)
+    c = c - c.mean(axis=0)
+    sd = np.sqrt(np.mean(c * c, axis=0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = (c.T @ c) / len(c) / np.outer(sd, sd)
+    return np.nan_to_num(r[np.triu_indices(z.shape[1], 1)], nan=0.0)
 
 
 @dataclass(frozen=True)
@@ -298,16 +368,21 @@ def _adjacent_difference_scale(x: np.ndarray, width: int) -> float:
 
 def find_events(
     means: dict[str, np.ndarray], dt: float, samples_per_block: int, n_samples: int,
-    units: dict[str, str] | None = None,
+    units: dict[str, str] | None = None, false_alarm: float = FALSE_ALARM,
 ) -> tuple[list[DisturbanceEvent], EventDetector]:  # fmt: skip
     """Events in the fine block means of the axes (``means``: {axis: (n_blocks,)}, equal
     lengths; ``dt`` s per block of ``samples_per_block`` samples; the record has ``n_samples``
-    samples), found and classified as in the module docstring."""
+    samples), found and classified as in the module docstring, at the record-wide
+    ``false_alarm`` probability."""
     names = tuple(means)
     x = np.column_stack([means[a] for a in names])
     scales = _scales(x, dt)
     tests = sum(len(s.starts) for s in scales)
-    limits = [thresholds(tests, len(names), s.dof) for s in scales]
+    rho = [axis_correlation(s.z) for s in scales]
+    limits = [
+        thresholds(tests, len(names), s.dof, r, false_alarm)
+        for s, r in zip(scales, rho, strict=True)
+    ]
     detector = EventDetector(
         dt,
         tuple(s.length * dt for s in scales),
@@ -315,6 +390,8 @@ def find_events(
         tuple(z for z, _ in limits),
         tuple(z for _, z in limits),
         names,
+        tuple(float(np.max(np.abs(r), initial=0.0)) for r in rho),
+        false_alarm,
     )
     spans, zs, ratios, lengths = [], [], [], []
     for s, (z1, z2) in zip(scales, limits, strict=True):

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import special
 
 import imupipe
 from imupipe.analysis import events as ev
@@ -212,6 +213,44 @@ def test_two_axis_threshold(second: float, expected: int) -> None:
         assert events[0].duration_s == pytest.approx(BOX * DT, abs=DT)
 
 
+def correlated_means(seed: int, rho: float) -> dict[str, np.ndarray]:
+    """Unit white means whose six axes share a common part: correlation ``rho`` per pair."""
+    rng = np.random.default_rng(seed)
+    common = rng.standard_normal(BLOCKS)
+    return {
+        AXES[j]: np.sqrt(rho) * common + np.sqrt(1 - rho) * rng.standard_normal(BLOCKS)
+        for j in range(6)
+    }
+
+
+def test_joint_tail_is_the_product_for_independent_axes_and_the_bivariate_normal_else() -> None:
+    t = 4.5
+    assert ev.joint_tail(t, np.array([0.0]))[0] == pytest.approx(4 * special.ndtr(-t) ** 2, 2e-3)
+    # rho = 0.8 at t = 1.5: 2 [P(X > t, Y > t) + P(X > t, Y < -t)] by scipy's bivariate cdf
+    assert ev.joint_tail(1.5, np.array([0.8, -0.8])) == pytest.approx([0.0697113] * 2, 1e-4)
+
+
+@pytest.mark.parametrize("second, expected", [(1.05, 1), (0.85, 0)])
+def test_correlated_axes_raise_the_two_axis_threshold(second: float, expected: int) -> None:
+    """On axes that share noise (rho 0.7) two-axis coincidences are common: z2 rises above the
+    independent-axes value, and a box between the two z2 is no event."""
+    means = correlated_means(4, 0.7)
+    z1, z2, sigma = limits(means)
+    det = ev.find_events(means, DT, 50, BLOCKS * 50)[1]
+    k = det.scales_s.index(BOX * DT)
+    assert det.correlation[k] == pytest.approx(0.7, abs=0.05)
+    dof = ev.WINSOR_EFFICIENCY * det.windows[k] / 2
+    independent = ev.thresholds(sum(det.windows), 6, dof)[1]
+    assert z2 > independent + 0.4
+    assert 1.05 * z2 < z1  # no single axis alone is an event
+    boxed = {a: v.copy() for a, v in means.items()}
+    for a, z in (("gyro_x", 1.05 * z2), ("accel_y", second * z2)):  # noise-free: z ~exact
+        boxed[a][AT : AT + BOX] = z * sigma[AXES.index(a)]
+    assert len(found(boxed)) == expected
+    if expected == 0:  # the same box clears the independent-axes z2: a false alarm before
+        assert second * z2 > independent
+
+
 @pytest.mark.parametrize("after, kind", [(0.6, "step"), (0.0, "transient")])
 def test_step_rule(after: float, kind: str) -> None:
     """An event that leaves the level changed by more than noise and than half its size is a
@@ -240,7 +279,7 @@ def test_a_lasting_level_change_alone_is_no_event() -> None:
 def test_fill_excised_draws_a_line_between_the_levels_either_side() -> None:
     y = np.concatenate([np.full(100, 1.0), np.full(40, 50.0), np.full(100, 3.0)])
     event = ev.DisturbanceEvent(1.0, 0.4, ("gyro_x",), {}, {}, {}, "transient", (100, 140), 0.5)
-    det = ev.EventDetector(DT, (), (), (), (), ("gyro_x",))
+    det = ev.EventDetector(DT, (), (), (), (), ("gyro_x",), ())
     filled = ev.fill_excised(y, ev.EventsFound(det, (event,), 0.01, 0.0))
     np.testing.assert_allclose(filled[100:140], np.linspace(1.0, 3.0, 42)[1:-1])
     assert filled[:100].tolist() == y[:100].tolist() and y[120] == 50.0

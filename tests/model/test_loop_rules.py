@@ -4,7 +4,9 @@ Each rule of :mod:`imupipe.model.loop` — significance (ΔBIC ≥ 10 for AVAR t
 Bonferroni-adjusted p below α = 0.001 for time-domain corrections), the hold-out (both halves /
 both segment parities must improve), the periodogram line, the flags (max |z|, the |z| > 3
 count) and the error (D/dof must fall; a slow correction's deviance may not rise by more than
-φ·χ²₁(0.95)) — gets one case that passes it and one that fails only it, and the test checks
+φ·χ²₁(0.95)), and the rule on both errors (issue 13 item 7: the time-domain deviance may not
+rise by more than χ²₁(0.95); the Allan-space or the time-domain one must fall by at least
+that) — gets one case that passes it and one that fails only it, and the test checks
 the decision a user sees: accepted or rejected, and the reason string of report.json.
 
 Three levels:
@@ -35,11 +37,14 @@ from scipy import optimize, stats
 
 from imupipe.model import effects, ieee952
 from imupipe.model.loop import (
+    AVAR_ONLY,
     AcceptedEffect,
     AxisSignals,
+    ErrorChange,
     Goodness,
     LoopResult,
     RejectedCandidate,
+    TimeFit,
     Trial,
     _decide,
     _judge,
@@ -174,6 +179,85 @@ def test_decision_records_are_what_report_json_shows():
         evidence,
         "flags do not clear",
     )
+
+
+# --------------------------------------------------------------------------------------------
+# both errors (issue 13 item 7): the time-domain one may not rise materially, and the Allan-space
+# or the time-domain one must fall significantly (χ²₁(0.95) = 3.84 either way)
+
+
+def _with_errors(
+    allan_fall: float, time_fall: float, kind: str = "temperature"
+) -> tuple[Trial, ErrorChange]:
+    """A trial past every other rule, with the given falls of both errors."""
+    change = ErrorChange(0.9, 0.8, allan_fall, 1.25, 1.05, time_fall, kind not in AVAR_ONLY)
+    trial, _ = _trial(column=kind in AVAR_ONLY)
+    return Trial(kind, trial.cand, 1.0, True, None, trial.holdout, change), change  # type: ignore[arg-type]
+
+
+def test_a_significant_fall_of_the_time_domain_error_alone_is_enough():
+    """A slow correction: the Allan-space error barely moves, the time-domain one falls."""
+    d = _decide(_with_errors(allan_fall=-2.0, time_fall=CHI2_95)[0])
+    assert (d.accept, d.reason) == (True, None)
+
+
+def test_a_significant_fall_of_the_allan_error_alone_is_enough():
+    d = _decide(_with_errors(allan_fall=CHI2_95, time_fall=-3.8)[0])
+    assert (d.accept, d.reason) == (True, None)
+
+
+def test_neither_error_falling_significantly_is_rejected_for_it():
+    d = _decide(_with_errors(allan_fall=3.8, time_fall=3.8)[0])
+    assert (d.accept, d.reason) == (
+        False,
+        "neither error falls significantly (Allan 0.9 -> 0.8, deviance fall 3.8; time-domain "
+        "1.25 -> 1.05, deviance fall 3.8; < 3.84)",
+    )
+
+
+def test_a_material_rise_of_the_time_domain_error_is_rejected_for_it():
+    d = _decide(_with_errors(allan_fall=20.0, time_fall=-3.9)[0])
+    assert (d.accept, d.reason) == (
+        False,
+        "the time-domain error rises (1.25 -> 1.05; deviance +3.9 > 3.84)",
+    )
+
+
+def test_an_avar_only_term_is_judged_on_the_allan_error_alone():
+    """A sinusoid stays in the series the time-domain error whitens: its rise is not judged."""
+    d = _decide(_with_errors(allan_fall=CHI2_95, time_fall=-500.0, kind="sinusoid")[0])
+    assert (d.accept, d.reason) == (True, None)
+    d = _decide(_with_errors(allan_fall=3.8, time_fall=500.0, kind="sinusoid")[0])
+    assert (d.accept, d.reason) == (
+        False,
+        "neither error falls significantly (Allan 0.9 -> 0.8, deviance fall 3.8; < 3.84)",
+    )
+
+
+def test_a_ramp_needs_no_fall_of_either_error_but_may_not_raise_the_time_domain_one():
+    """A linear ramp is the time-domain error's nuisance and the Allan model's R term."""
+    ramp = ErrorChange(0.75, 0.74, 0.1, 0.97, 0.97, 0.0, True, False)
+    trial, _ = _with_errors(0.0, 0.0)
+    d = _decide(Trial("ramp", trial.cand, 1.0, True, None, trial.holdout, ramp))  # type: ignore[arg-type]
+    assert (d.accept, d.reason) == (True, None)
+    rises = ErrorChange(0.75, 0.74, 0.1, 0.97, 0.99, -3.9, True, False)
+    d = _decide(Trial("ramp", trial.cand, 1.0, True, None, trial.holdout, rises))  # type: ignore[arg-type]
+    assert (d.accept, d.reason) == (
+        False,
+        "the time-domain error rises (0.97 -> 0.99; deviance +3.9 > 3.84)",
+    )
+
+
+def test_error_change_is_the_allan_deviance_drop_over_phi_and_the_time_likelihood_ratio():
+    old = _fit(30.0)  # D/dof 3: dispersion 3
+    new = _fit(12.0)
+    time_old, time_new = TimeFit(1.2, 100, -50.0), TimeFit(1.0, 100, -40.0)
+    e = ErrorChange.between(old, new, time_old, time_new)
+    assert (e.allan_before, e.allan_after) == (3.0, 1.2)
+    assert e.allan_fall == pytest.approx(18.0 / 3.0)
+    assert time_old.deviance == pytest.approx(70.0) and time_new.deviance == pytest.approx(60.0)
+    assert (e.time_before, e.time_after, e.time_fall) == (1.2, 1.0, pytest.approx(10.0))
+    assert e.as_evidence()["time_domain_deviance_fall"] == pytest.approx(10.0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -531,6 +615,9 @@ def test_temperature_coupling_past_bonferroni_is_accepted(run_axis):
     assert ev["n_time_domain_tests"] == 4  # temperature, step, warm-up, ramp (no supply)
     assert ev["p_value_family"] == 4 * ev["p_value_bonferroni"] < 1e-3
     assert ev["holdout"]["holds"] is True
+    # a slow correction: its fall shows in the time domain, not in Allan space
+    assert ev["time_domain_deviance_fall"] >= CHI2_95 > ev["allan_error_fall_chi2"]
+    assert ev["time_domain_error_judged"] is True
 
 
 def test_temperature_coupling_significant_only_before_the_family_factor_is_rejected(run_axis):
