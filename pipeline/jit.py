@@ -1,4 +1,5 @@
-"""The numba kernels' argument types: one compiled specialisation per kernel.
+"""The numba kernels' argument types (one compiled specialisation per kernel) and whether
+numba's disk cache holds them.
 
 numba compiles a kernel once per distinct argument type, and an array's type includes whether
 it is writable: a column polars hands out without copying is read-only, a computed array is
@@ -25,3 +26,18 @@ def kernel_input(x: npt.ArrayLike, dtype: npt.DTypeLike = None) -> np.ndarray:
         out = out.view()
         out.flags.writeable = False
     return out
+
+
+def disk_cached(kernel: object) -> bool:
+    """Whether numba's disk cache holds a compiled version of ``kernel`` (a ``cache=True``
+    dispatcher) for its current source: the cache index numba itself reads before compiling
+    (stale after an edit of the kernel's file).  True when that cannot be told (no disk cache,
+    another numba's layout): then nothing is done ahead and numba compiles as it always does."""
+    index = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
+    load = getattr(index, "_load_index", None)
+    if load is None:
+        return True
+    try:
+        return bool(load())
+    except Exception:  # an unreadable index: numba recompiles; so would we
+        return False
