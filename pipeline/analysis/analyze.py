@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Protocol
@@ -35,6 +36,7 @@ from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.errors import ImupipeError, TooFewFramesError
 from imupipe.io.columns import HOUSEKEEPING, ColumnSource, open_columns
 from imupipe.io.decode import ImuRecording
+from imupipe.model.ahead import compile_ahead
 from imupipe.model.effects import psd_line, spike_candidate
 from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
@@ -75,6 +77,9 @@ class AnalyzeOptions:
     temperature_topic: str | None = None
     events: bool = True
     """Find disturbance events jointly on all axes and excise them (imupipe.analysis.events)."""
+    compile_ahead: bool = True
+    """On a cold numba cache, compile the fit's and the loop's kernels in a child process while
+    this one decodes (imupipe.model.ahead); off in a fleet's Dask worker."""
 
 
 def analyze_options(**options: object) -> AnalyzeOptions:
@@ -241,12 +246,15 @@ def analyze_axes(
     options: AnalyzeOptions,
     progress: StageProgress,
     t0_stamp_s: float = 0.0,
+    kernels_ready: Callable[[], None] = lambda: None,
 ) -> tuple[dict[str, AxisResult], dict[str, str], EventsFound | None]:
     """Stages 3–4 (+ loop) on the chosen segment (or, policy ``"mask"``, the whole recording
     on its sample grid), one axis at a time; returns the results of the analysed axes, the
     axes found stuck (constant: nothing to analyse) and the disturbance events (option
     ``events``: found jointly on all axes first, their intervals excluded on every axis and
-    filled for the time-domain steps, :func:`imupipe.analysis.events.fill_excised`)."""
+    filled for the time-domain steps, :func:`imupipe.analysis.events.fill_excised`).
+    ``kernels_ready`` is called before each axis' outliers and noise fit
+    (:meth:`imupipe.model.ahead.Ahead.wait`)."""
     rows, tau0 = series.rows, series.tau0_s
     aux: dict[str, np.ndarray | None] = {}
     for name in HOUSEKEEPING:
@@ -271,6 +279,7 @@ def analyze_axes(
                 if found is not None:
                     y = fill_excised(y, found)
                 curve = allan_curves([y], tau0, m, excluded=excluded)[0]
+                kernels_ready()
                 results[name] = axis_result(
                     name, y, curve, tau0, aux["temp_c"], aux["supply_v"], options.loop,
                     excluded,
@@ -293,17 +302,23 @@ def analyze(
     The raw signals go to ``outputs.begin`` as soon as the segment is known (the Rerun
     recording encodes them while the axes are analysed).  A recording whose estimated peak
     exceeds ``options.memory_budget_bytes`` is read through the spilled column source, with
-    the same numbers; the report's warnings say so.
+    the same numbers; the report's warnings say so.  On a cold numba cache the fit's and the
+    loop's kernels compile in a child meanwhile (``options.compile_ahead``,
+    :mod:`imupipe.model.ahead`).
     """
-    with open_columns(
-        Path(path),
-        options.topic,
-        progress,
-        options.memory_budget_bytes,
-        options.tmp_dir,
-        options.temperature_topic,
-    ) as source:
+    with (
+        compile_ahead(options.loop, options.compile_ahead) as ahead,
+        open_columns(
+            Path(path),
+            options.topic,
+            progress,
+            options.memory_budget_bytes,
+            options.tmp_dir,
+            options.temperature_topic,
+        ) as source,
+    ):
         if source.spilled:
+            ahead.wait()  # then the spilled path's own child compiles only the others
             with progress.stage("compile", 1, "step"):
                 load_kernels(options.loop)
         rec = source.conditioning()
@@ -316,7 +331,9 @@ def analyze(
             outputs.begin(source.signals(series.rows))
         try:
             with threadpool_limits(BLAS_THREADS, user_api="blas"):
-                results, stuck, found = analyze_axes(source, series, options, progress, t0_stamp_s)
+                results, stuck, found = analyze_axes(
+                    source, series, options, progress, t0_stamp_s, ahead.wait
+                )
             if not results:
                 raise no_axis_error(about, [stuck_warning(a, w) for a, w in stuck.items()])
         except BaseException:

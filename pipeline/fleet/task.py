@@ -118,7 +118,8 @@ def analyze_unit(rec: Recording, out_root: str, options: AnalyzeOptions) -> Unit
     worker = f"{socket.gethostname()}:{os.getpid()}"
     root = Path(out_root)
     staging = root / STAGING / f"{rec.name}-{uuid.uuid4().hex}"
-    opts = budget_for_worker(options, _worker_memory_limit())
+    # a worker is one core: no child compiling numba kernels ahead beside it
+    opts = replace(budget_for_worker(options, _worker_memory_limit()), compile_ahead=False)
     try:
         sheet = None if opts.datasheet is None else load_datasheet(opts.datasheet)
         outputs = ReportOutputs(staging, opts.figures, opts.rrd_full, datasheet=sheet)

@@ -30,6 +30,7 @@ import numpy as np
 import scipy.fft
 from scipy import signal, special
 
+from imupipe.jit import kernel_input
 from imupipe.stats import robust
 from imupipe.stats.allan import NO_CORRECTION, SparseCorrection
 from imupipe.vocab import CHI2_95
@@ -235,7 +236,8 @@ def _innovations(gamma: np.ndarray) -> np.ndarray:
         for j in range(t - 1):
             acc += phi[j] * gamma[t - 1 - j]
         k = (gamma[t] - acc) / v
-        prev[: t - 1] = phi[: t - 1]
+        for j in range(t - 1):  # not a slice assignment: see imupipe.jit
+            prev[j] = phi[j]
         for j in range(t - 1):
             phi[j] = prev[j] - k * prev[t - 2 - j]
         phi[t - 1] = k
@@ -543,19 +545,34 @@ SPIKE_FALSE_ALARM = 1e-3
 """Family-wise (whole record) false-alarm rate of the spike threshold under Gaussian noise."""
 
 
-@numba.njit(cache=True, nogil=True)
-def _block_level(y: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+LEVEL_CHUNK = 1 << 20
+"""Samples of the blocks whose medians numpy takes at once (an 8 MB partitioned copy)."""
+
+
+def _block_level(y: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
     """(median of each block of ``block`` samples (the last may be shorter), float32 deviation
-    y_i − median of i's block)."""
+    y_i − median of i's block).  The medians are numpy's over chunks of whole blocks (numba's
+    np.median would cost ~1.5 s of compiling on a first run), the deviations one compiled pass."""
     n = y.size
+    whole = n // block
     level = np.empty((n + block - 1) // block)
-    dev = np.empty(n, np.float32)
+    per_chunk = max(1, LEVEL_CHUNK // block)
+    for b in range(0, whole, per_chunk):
+        rows = y[b * block : min(whole, b + per_chunk) * block].reshape(-1, block)
+        level[b : b + len(rows)] = np.median(rows, axis=1)
+    if whole < level.size:
+        level[whole] = np.median(y[whole * block :])
+    return level, _deviation(y, level, block)
+
+
+@numba.njit(cache=True, nogil=True)
+def _deviation(y: np.ndarray, level: np.ndarray, block: int) -> np.ndarray:  # pragma: no cover
+    """float32 y_i − level of i's block of ``block`` samples."""
+    dev = np.empty(y.size, np.float32)
     for b in range(level.size):
-        lo, hi = b * block, min(n, (b + 1) * block)
-        level[b] = np.median(y[lo:hi])
-        for i in range(lo, hi):
+        for i in range(b * block, min(y.size, (b + 1) * block)):
             dev[i] = y[i] - level[b]
-    return level, dev
+    return dev
 
 
 @numba.njit(cache=True, nogil=True)
@@ -567,7 +584,8 @@ def _beyond(dev: np.ndarray, limit: float) -> np.ndarray:  # pragma: no cover (J
         if abs(dev[i]) > limit:
             if count == len(out):
                 grown = np.empty(max(16, 2 * count), np.int64)
-                grown[:count] = out
+                for j in range(count):  # not a slice assignment: see imupipe.jit
+                    grown[j] = out[j]
                 out = grown
             out[count] = i
             count += 1
@@ -586,7 +604,7 @@ def spike_candidate(y: np.ndarray, tau0: float) -> Candidate | None:
     coarsely quantised noise (e.g. 7 LSB at z·scale = 6.2 LSB) is not a spike.  The correction
     replaces each spike by its block's median.
     """
-    y = np.ascontiguousarray(y, dtype=np.float64)
+    y = kernel_input(y, np.float64)
     block = max(LEVEL_MIN_BLOCK, round(LEVEL_BLOCK_S / tau0))
     level, dev = _block_level(y, min(block, y.size))
     sigma_mad = robust.MAD_TO_SIGMA * robust.mad(dev, center=0.0)
@@ -672,7 +690,7 @@ def psd_line(
     with the level estimated robustly; the Hann window's correlated bins make it conservative).
     """
     n = min(len(y), PSD_MAX_SAMPLES)
-    y = y[:n]
+    y = kernel_input(y[:n])
     fix = (correction or NO_CORRECTION).within(0, n)
     mean = (y.sum() - fix.value.sum()) / n
     windowed, win_sum, win_sq_sum = _hann_windowed(y, mean, fix.index, fix.value)

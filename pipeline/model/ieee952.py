@@ -149,7 +149,8 @@ def _passive_lstsq(
         for i in range(m):
             rt[c, i] = a[i, cols[c]]
             size[c] += rt[c, i] ** 2
-    rt[k] = b
+    for i in range(m):  # element by element, not slice assignments: see imupipe.jit
+        rt[k, i] = b[i]
     v = np.empty(m)
     for c in range(k):
         norm = 0.0
@@ -158,7 +159,8 @@ def _passive_lstsq(
         norm = np.sqrt(norm)
         if norm == 0.0:
             continue
-        v[: m - c] = rt[c, c:]
+        for i in range(m - c):
+            v[i] = rt[c, c + i]
         v[0] += norm if v[0] >= 0 else -norm
         vnorm = 0.0
         for i in range(m - c):
@@ -328,7 +330,9 @@ def _fit_designs(
     coefs = np.empty((designs.shape[0], designs.shape[2]))
     devs = np.empty(designs.shape[0])
     for f in range(designs.shape[0]):
-        coefs[f], devs[f] = _fit_gamma(designs[f], avar, edf, offset)
+        coef, devs[f] = _fit_gamma(designs[f], avar, edf, offset)
+        for k in range(coef.size):  # not a row assignment: see imupipe.jit
+            coefs[f, k] = coef[k]
     return coefs, devs
 
 
@@ -341,10 +345,11 @@ def fit_nonneg_gamma(
     small solve per iteration — with step halving so the deviance never increases.
     Returns (c, deviance).
     """
-    avar = np.ascontiguousarray(avar, dtype=float)
-    offset = np.ascontiguousarray(np.broadcast_to(np.asarray(offset, dtype=float), avar.shape))
-    design = np.ascontiguousarray(design, dtype=float)
-    coef, dev = _fit_gamma(design, avar, np.ascontiguousarray(edf, dtype=float), offset)
+    # writable C-contiguous copies (tiny): the arrays' types of _fit_designs' call, so that
+    # _fit_gamma compiles once whoever calls it
+    design, avar, edf = (np.array(a, dtype=float, order="C") for a in (design, avar, edf))
+    offset = np.array(np.broadcast_to(np.asarray(offset, dtype=float), avar.shape))
+    coef, dev = _fit_gamma(design, avar, edf, offset)
     return coef, float(dev)
 
 

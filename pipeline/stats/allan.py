@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from imupipe.jit import kernel_input
 from imupipe.stats.edf import chi2_interval, edf_oadev, noise_ids
 
 PHASE_BUDGET_BYTES = 64 << 20
@@ -141,7 +142,7 @@ def phase(
     x = np.empty((len(cols), len(cols[0]) + 1))
     skip = None if _runs_of(excluded, len(cols[0])) is None else np.asarray(excluded, dtype=bool)
     for row, col in zip(x, cols, strict=True):
-        col = np.asarray(col, dtype=np.float64)
+        col = kernel_input(col, np.float64)
         if skip is None:
             _integrate(col, tau0, row, fix.index, fix.value)
         else:

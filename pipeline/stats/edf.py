@@ -139,14 +139,15 @@ def _acf_power(
     for t in range(count):
         acc += _detrended(src, m, phase, line, t)
     w = np.empty(dmax + 2)
-    d = 0
-    while True:
+    p = 0.0
+    for d in range(dmax + 1):  # d: int64 from the start (one compiled _acf_pass)
         num, den, acc = _acf_pass(src, m, phase, count, line, d, acc / (count - d), w)
         r1 = num / den
         delta = r1 / (1.0 + r1)
-        if delta < 0.25 or d >= dmax:
-            return -2.0 * (delta + d)
-        d += 1
+        p = -2.0 * (delta + d)
+        if delta < 0.25:
+            break
+    return p
 
 
 @numba.njit(cache=True)
@@ -259,13 +260,14 @@ def _acf_ids(x: np.ndarray, m: np.ndarray, copy_max: int) -> np.ndarray:  # prag
     out = np.empty(m.size, dtype=np.int64)
     for i in numba.prange(m.size):
         count = (x.size - 1) // m[i]
+        src, step, phase = x, m[i], True
         if count <= copy_max:
-            z = np.empty(count)
+            src = np.empty(count)
             for t in range(count):
-                z[t] = _value(x, m[i], True, t)
-            out[i] = _acf_noise_id(z, 1, False, count, 2)
-        else:
-            out[i] = _acf_noise_id(x, m[i], True, count, 2)
+                src[t] = _value(x, m[i], True, t)
+            step, phase = 1, False
+        # one call: a single compiled _acf_noise_id (step int64, phase bool, not literals)
+        out[i] = _acf_noise_id(src, step, phase, count, 2)
     return out
 
 

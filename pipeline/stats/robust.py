@@ -14,6 +14,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from imupipe.jit import kernel_input
+
 SELECT_BINS = 1 << 16
 """Histogram bins of each selection pass."""
 MAD_TO_SIGMA = 1.4826
@@ -48,15 +50,18 @@ def _extent(
 @numba.njit(cache=True, nogil=True)
 def _select(
     x: np.ndarray, k: int, lo: float, hi: float, center: float, absolute: bool, diff: bool
-) -> tuple[float, float]:  # pragma: no cover (JIT)
+) -> tuple[float, float, np.ndarray, int]:  # pragma: no cover (JIT)
     """Order statistics k and k + 1 (0-based) of the values in [lo, hi] (see :func:`_value`),
-    by histogram selection, O(n); rank k + 1 is +inf when it does not exist.
+    by histogram selection, O(n); rank k + 1 is +inf when it does not exist.  Returns them, an
+    empty array and 0, or (NaN, the least value above the bin, the bin's values unsorted, rank k's
+    index among them) for :func:`_order_statistics` to sort.
 
     Each pass bins the values in [lo, hi] into :data:`SELECT_BINS` bins, with each bin's
     smallest and largest member (the bin index is monotone in the value, so a bin's members are
     exactly the values between those two), and keeps the bin holding rank k; rank k + 1 is in
     that bin or is the smallest member of the next non-empty one.  A bin of equal values
-    (quantised data) ends the search; a bin of few values is sorted.  Values outside [lo, hi]
+    (quantised data) ends the search; a bin of few values is returned to be sorted (by numpy:
+    numba's sort would cost ~1.5 s of compiling on a first run).  Values outside [lo, hi]
     are not ranked.
     """
     size = len(x) - diff
@@ -87,7 +92,7 @@ def _select(
         lo, hi = bin_lo[b], bin_hi[b]
         i = k - below
         if lo == hi:
-            return lo, lo if i + 1 < hist[b] else above
+            return lo, lo if i + 1 < hist[b] else above, np.empty(0), 0
         if hist[b] <= 4096 or scale == 0.0:
             rest = np.empty(hist[b] + 1)
             j = 0
@@ -95,8 +100,19 @@ def _select(
                 v = _value(x, t, center, absolute, diff)
                 rest[j] = v
                 j += (v >= lo) & (v <= hi)
-            rest = np.sort(rest[:j])
-            return rest[i], rest[i + 1] if i + 1 < j else above
+            return np.nan, above, rest[:j], i
+
+
+def _order_statistics(
+    x: np.ndarray, k: int, lo: float, hi: float, center: float, absolute: bool, diff: bool
+) -> tuple[float, float]:
+    """Order statistics k and k + 1 of :func:`_select` (rank k + 1 is +inf when it does not
+    exist)."""
+    first, second, rest, i = _select(x, k, lo, hi, center, absolute, diff)
+    if rest.size == 0:
+        return first, second
+    rest.sort()
+    return rest[i], rest[i + 1] if i + 1 < rest.size else second
 
 
 def _median(
@@ -104,11 +120,11 @@ def _median(
     positive: bool = False,
 ) -> float:  # fmt: skip
     """Median of the values of :func:`_value` (NaN if there are none or one is not finite)."""
-    x = np.ascontiguousarray(x)
+    x = kernel_input(x)
     count, lo, hi, finite = _extent(x, center, absolute, diff, positive)
     if count == 0 or not finite:
         return float("nan")
-    first, second = _select(x, (count - 1) // 2, lo, hi, center, absolute, diff)
+    first, second = _order_statistics(x, (count - 1) // 2, lo, hi, center, absolute, diff)
     return float(first if count % 2 else (first + second) / 2)
 
 
@@ -153,9 +169,9 @@ def quantum(x: np.ndarray, probe: int = QUANTUM_PROBE) -> float:
 def abs_quantile(x: np.ndarray, p: float) -> float:
     """``np.quantile(np.abs(v), p, method="higher")`` of the finite values v = x, without
     copies: order statistic ceil(p (n - 1)) of |x| by histogram selection."""
-    x = np.ascontiguousarray(x)
+    x = kernel_input(x)
     count, lo, hi, finite = _extent(x, 0.0, True, False, False)
     if count == 0 or not finite:
         return float("nan")
     k = int(np.ceil(p * (count - 1)))
-    return float(_select(x, k, lo, hi, 0.0, True, False)[0])
+    return float(_order_statistics(x, k, lo, hi, 0.0, True, False)[0])

@@ -1,0 +1,113 @@
+"""The IEEE 952 fit's and the closed loop's numba kernels compiled ahead, in a child process, on
+a first run after installing.
+
+With an empty numba disk cache every kernel compiles on its first call (docs/performance.md,
+"First run after installing").  The fit's and the loop's kernels (:data:`FIT_KERNELS`,
+:data:`LOOP_KERNELS`) are first called only after the recording is decoded and the first
+axis' Allan curve and outliers are computed.  When their cache is cold, :func:`compile_ahead`
+starts a child process that compiles them into numba's disk cache
+(:func:`compile_late_kernels`, on synthetic inputs of the types the analysis passes) while
+this process decodes and computes, compiling the earlier kernels itself; :meth:`Ahead.wait`,
+before the first fit, waits for the child, and numba then loads the kernels from the cache.
+A warm cache costs a look at the kernels' cache indices and no child.  If the child fails
+(e.g. it cannot write the cache) or takes longer than :data:`WAIT_S`, the kernels compile in
+this process on first use, as they would without it.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from types import TracebackType
+
+import numpy as np
+
+from imupipe.jit import disk_cached
+from imupipe.model import effects, ieee952
+from imupipe.stats import edf
+from imupipe.stats.allan import AllanCurve
+
+FIT_KERNELS = (ieee952._fit_designs, ieee952._fit_gamma, ieee952._nnls, ieee952._passive_lstsq)
+"""The IEEE 952 fit's kernels (~7 s of CPU to compile, the longest chain)."""
+LOOP_KERNELS = (effects._innovations, effects._hann_windowed, edf._mvar_over_avar)
+"""Kernels first called by the closed loop: its whitener, its periodogram, and the R(n) noise
+identification of its short Allan curves."""
+WAIT_S = 300.0
+"""Longest wait for the child before compiling in this process instead."""
+
+
+def compile_late_kernels(loop: bool) -> None:
+    """Compile :data:`FIT_KERNELS` (and :data:`LOOP_KERNELS` with ``loop``) into numba's disk
+    cache by calling them on synthetic inputs: a white-noise Allan curve and white noise."""
+    tau = np.geomspace(0.01, 100.0, 41)
+    adev = 1e-3 / np.sqrt(tau)
+    n_terms = np.round(1e4 / tau).astype(np.int64)
+    alpha = np.zeros(tau.size, np.int64)
+    curve = AllanCurve(tau, adev, 0.9 * adev, 1.1 * adev, n_terms / 2.0, n_terms, alpha, 0.683)
+    ieee952.fit_noise_terms(curve, "gyro")
+    if loop:
+        white = np.random.default_rng(0).standard_normal(4096)
+        effects.Whitener(effects.NoisePsd(1.0, 0.0, np.inf, 0.0), white.size, 0.01)
+        effects.psd_line(white, 0.01, 10.0, 20.0)
+        edf.b1_noise_id(white, 100)  # white phase: the R(n) branch
+
+
+class Ahead:
+    """The child compiling the late kernels (or none); a context manager that stops it if the
+    analysis ends before :meth:`wait`."""
+
+    def __init__(self, child: subprocess.Popen | None) -> None:
+        self.child = child
+
+    def wait(self) -> None:
+        """Wait for the child (at most :data:`WAIT_S`, then stop it); idempotent."""
+        if self.child is None:
+            return
+        try:
+            self.child.wait(WAIT_S)
+        except subprocess.TimeoutExpired:
+            self.child.kill()
+            self.child.wait()
+        self.child = None
+
+    def __enter__(self) -> Ahead:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if self.child is not None:
+            self.child.kill()
+            self.child.wait()
+            self.child = None
+
+
+def late_kernels(loop: bool) -> tuple[object, ...]:
+    """The late kernels an analysis with (or without) the closed loop calls."""
+    return FIT_KERNELS + (LOOP_KERNELS if loop else ())
+
+
+def child_command(loop: bool) -> list[str]:
+    """The child's command line: this Python running :func:`compile_late_kernels`."""
+    code = f"from imupipe.model.ahead import compile_late_kernels; compile_late_kernels({loop})"
+    return [sys.executable, "-c", code]
+
+
+def compile_ahead(loop: bool, enabled: bool = True) -> Ahead:
+    """Start the child compiling the late kernels if ``enabled`` and any of them is not in
+    numba's disk cache; else an :class:`Ahead` without a child."""
+    if not enabled or all(disk_cached(k) for k in late_kernels(loop)):
+        return Ahead(None)
+    try:
+        child = subprocess.Popen(
+            child_command(loop),
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    except OSError:  # no process to spare: compile here, as without a child
+        return Ahead(None)
+    return Ahead(child)

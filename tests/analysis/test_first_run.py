@@ -1,0 +1,156 @@
+"""A first run after installing, numba's disk cache empty: the IEEE 952 fit's and the loop's
+kernels are compiled ahead by a child process (imupipe.model.ahead), every kernel compiles once,
+and report.json is the same as from a run that compiles in process."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import imupipe
+from imupipe.model import ahead
+
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "adis16364_default_5min.mcap"
+
+PROBE = r"""
+import json, sys
+import numba.core.event as ev
+from numba.core.registry import CPUDispatcher
+
+compiled = []  # every kernel this process compiles itself (not loaded from the cache)
+
+
+class Listener(ev.Listener):
+    def on_start(self, event):
+        func = event.data["dispatcher"].py_func
+        compiled.append(f"{func.__module__}.{func.__qualname__}")
+
+    def on_end(self, event):
+        pass
+
+
+ev.register("numba:compile", Listener())
+import imupipe
+from imupipe.jit import disk_cached
+from imupipe.model.ahead import late_kernels
+
+cold = [not disk_cached(k) for k in late_kernels(True)]
+imupipe.analyze(sys.argv[1], out=sys.argv[2], rrd=False, figures=False)
+kernels = {
+    f"{d.py_func.__module__}.{d.py_func.__qualname__}": len(d.signatures)
+    for m in list(sys.modules.values()) if m.__name__.startswith("imupipe")
+    for d in vars(m).values() if isinstance(d, CPUDispatcher)
+}
+print(json.dumps({
+    "cold_before": cold,
+    "cached_after": [disk_cached(k) for k in late_kernels(True)],
+    "compiled_here": compiled,
+    "signatures": kernels,
+}))
+"""
+
+LATE = {f"{k.py_func.__module__}.{k.py_func.__qualname__}" for k in ahead.late_kernels(True)}
+
+TWO_DTYPES = {"imupipe.stats.robust._extent", "imupipe.stats.robust._select"}
+"""Kernels called on float64 series and on float32 deviations (effects.spike_candidate)."""
+LITERAL_FLAG = {"imupipe.stats.edf._value"}
+"""Called with the literal ``phase=True`` by the gather in edf._acf_ids (inlined by LLVM) and
+with a runtime flag by _acf_power: a tiny function, two specialisations."""
+
+
+@pytest.fixture(scope="module")
+def cold_run(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """The sample analysed in a fresh interpreter with an empty NUMBA_CACHE_DIR."""
+    tmp = tmp_path_factory.mktemp("cold")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp / "numba")}
+    done = subprocess.run(
+        [sys.executable, "-c", PROBE, str(SAMPLE), str(tmp / "out")],
+        env=env, capture_output=True, text=True, timeout=900, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
+    probe = json.loads(done.stdout.splitlines()[-1])
+    probe["report"] = json.loads((tmp / "out" / "report.json").read_text())
+    return probe
+
+
+@pytest.fixture(scope="module")
+def child_failed_report(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """report.json of the sample analysed here with the cache taken for cold and a child that
+    fails at once, leaving the cache as it was (a read-only cache, a crash): the kernels
+    compile (or load) in this process."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(ahead, "disk_cached", lambda kernel: False)
+        mp.setattr(ahead, "child_command", lambda loop: [sys.executable, "-c", "exit(3)"])
+        out = tmp_path_factory.mktemp("failed-child")
+        imupipe.analyze(SAMPLE, out, rrd=False, figures=False)
+    return json.loads((out / "report.json").read_text())
+
+
+def test_cold_cache_child_compiles_the_late_kernels(cold_run: dict) -> None:
+    assert all(cold_run["cold_before"])
+    assert all(cold_run["cached_after"])
+    # the analysis loaded the child's compiled kernels: same types, nothing compiled twice
+    assert LATE.isdisjoint(cold_run["compiled_here"])
+    assert "imupipe.stats.allan._sum_sq_second_diff" in cold_run["compiled_here"]
+
+
+def test_each_kernel_compiles_once_on_the_sample(cold_run: dict) -> None:
+    """A second specialisation (a read-only column, int32 for int64, a literal argument) costs
+    a whole compile of the kernel on every first run."""
+    counts = cold_run["signatures"]
+    assert counts["imupipe.model.ieee952._fit_gamma"] == 1
+    assert counts["imupipe.stats.edf._acf_pass"] == 1
+    several = {name: n for name, n in counts.items() if n > 1}
+    assert several == dict.fromkeys(TWO_DTYPES | LITERAL_FLAG, 2)
+
+
+def test_cold_cache_report_equals_the_in_process_report(
+    cold_run: dict, child_failed_report: dict
+) -> None:
+    cold = cold_run["report"]
+    assert cold["input"]["path"] == child_failed_report["input"]["path"] == str(SAMPLE)
+    for axis in ("gyro_x", "accel_z"):
+        terms = cold["axes"][axis]["ieee952"]
+        assert terms["random_walk"] == child_failed_report["axes"][axis]["ieee952"]["random_walk"]
+        assert terms["random_walk"]["value"] > 0
+        assert cold["axes"][axis]["allan"] == child_failed_report["axes"][axis]["allan"]
+    assert cold == child_failed_report
+
+
+def test_failed_child_is_waited_for_and_forgotten(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
+    monkeypatch.setattr(ahead, "child_command", lambda loop: [sys.executable, "-c", "exit(3)"])
+    with ahead.compile_ahead(loop=True) as started:
+        assert started.child is not None
+        child = started.child
+        started.wait()
+        started.wait()  # idempotent
+    assert started.child is None and child.returncode == 3
+
+
+def test_warm_cache_or_fleet_worker_starts_no_child(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(ahead, "child_command", lambda loop: pytest.fail("a child was started"))
+    monkeypatch.setattr(ahead, "disk_cached", lambda kernel: True)
+    assert ahead.compile_ahead(loop=True).child is None
+    monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
+    assert ahead.compile_ahead(loop=True, enabled=False).child is None
+
+
+def test_without_the_loop_its_kernels_are_not_compiled_ahead() -> None:
+    assert set(ahead.late_kernels(False)) == set(ahead.FIT_KERNELS)
+    assert set(ahead.LOOP_KERNELS) <= set(ahead.late_kernels(True))
+
+
+def test_an_analysis_ending_early_stops_the_child(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
+    sleeper = [sys.executable, "-c", "import time; time.sleep(60)"]
+    monkeypatch.setattr(ahead, "child_command", lambda loop: sleeper)
+    with pytest.raises(imupipe.ImupipeError), ahead.compile_ahead(loop=True) as started:
+        child = started.child
+        raise imupipe.ImupipeError("bad input")
+    assert child.poll() is not None  # killed, not left running

@@ -1,0 +1,56 @@
+"""imupipe.jit: kernel inputs of one type (read-only, C-contiguous), and reading numba's cache
+state."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from imupipe.jit import disk_cached, kernel_input
+
+
+def test_kernel_input_is_a_read_only_view_of_a_contiguous_array() -> None:
+    x = np.arange(5.0)
+    out = kernel_input(x)
+    assert not out.flags.writeable and out.flags.c_contiguous
+    assert np.shares_memory(out, x)  # no copy
+    assert x.flags.writeable  # the caller's array is left writable
+    x[0] = 7.0
+    assert out[0] == 7.0
+
+
+def test_kernel_input_copies_only_a_strided_or_other_dtype_array() -> None:
+    x = np.arange(10.0)
+    strided = kernel_input(x[::2])
+    assert strided.flags.c_contiguous and not strided.flags.writeable
+    assert strided.tolist() == [0.0, 2.0, 4.0, 6.0, 8.0]
+    as_float = kernel_input(np.arange(3, dtype=np.int32), np.float64)
+    assert as_float.dtype == np.float64 and as_float.tolist() == [0.0, 1.0, 2.0]
+    already = np.arange(3.0)
+    already.flags.writeable = False
+    assert kernel_input(already) is already  # already read-only: returned as it is
+
+
+def _kernel(index: object) -> SimpleNamespace:
+    """A stand-in dispatcher whose disk cache index loads as ``index()``."""
+    return SimpleNamespace(_cache=SimpleNamespace(_cache_file=SimpleNamespace(_load_index=index)))
+
+
+def test_disk_cached_reads_the_index_numba_reads() -> None:
+    assert disk_cached(_kernel(lambda: {("sig", "cpu"): "data-1"}))
+    assert not disk_cached(_kernel(dict))  # empty or stale index: numba will compile
+
+
+def test_disk_cached_unreadable_index_is_cold() -> None:
+    def broken() -> dict:
+        raise EOFError("truncated index")
+
+    assert not disk_cached(_kernel(broken))
+
+
+@pytest.mark.parametrize("kernel", [object(), SimpleNamespace(_cache=SimpleNamespace())])
+def test_disk_cached_without_a_disk_cache_claims_nothing_to_do(kernel: object) -> None:
+    """No disk cache to fill (or another numba's layout): nothing is compiled ahead."""
+    assert disk_cached(kernel)
