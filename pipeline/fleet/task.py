@@ -80,8 +80,10 @@ def _worker_memory_limit() -> int | None:
 
 
 def budget_for_worker(options: AnalyzeOptions, memory_limit: int | None) -> AnalyzeOptions:
-    """``options`` with the memory budget lowered to :data:`WORKER_MEMORY_SHARE` of the
-    worker's limit when that is smaller."""
+    """``options`` for one Dask worker: one axis at a time (a worker is one core:
+    :data:`imupipe.fleet.cluster.SINGLE_THREAD_ENV`), and the memory budget lowered to
+    :data:`WORKER_MEMORY_SHARE` of the worker's limit when that is smaller."""
+    options = replace(options, workers=1)
     if memory_limit is None:
         return options
     cap = int(WORKER_MEMORY_SHARE * memory_limit)
