@@ -77,7 +77,9 @@ def analyze(
     opts = analyze_options(**options)
     sheet = None if opts.datasheet is None else load_datasheet(opts.datasheet)
     with StageProgress(quiet=not progress) as bars, staged_output(out_dir) as staging:
-        outputs = ReportOutputs(staging, opts.figures, opts.rrd_full, datasheet=sheet)
+        outputs = ReportOutputs(
+            staging, opts.figures, opts.rrd_full, datasheet=sheet, processes=opts.workers
+        )
         return _run_analysis(Path(path), opts, bars, outputs)
 
 

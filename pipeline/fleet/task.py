@@ -123,7 +123,9 @@ def analyze_unit(rec: Recording, out_root: str, options: AnalyzeOptions) -> Unit
     opts = budget_for_worker(options, _worker_memory_limit())
     try:
         sheet = None if opts.datasheet is None else load_datasheet(opts.datasheet)
-        outputs = ReportOutputs(staging, opts.figures, opts.rrd_full, datasheet=sheet)
+        outputs = ReportOutputs(
+            staging, opts.figures, opts.rrd_full, datasheet=sheet, processes=opts.workers
+        )
         with local_copy(rec) as path:  # the outputs name the URL, not the temporary copy
             label = None if rec.local else rec.location
             result = run_analysis(path, opts, StageProgress(quiet=True), outputs, label)
