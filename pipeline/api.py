@@ -58,7 +58,8 @@ def analyze(
         **options: fields of :class:`imupipe.analysis.analyze.AnalyzeOptions` (``topic``,
             ``taus_per_decade``, ``gaps``, ``loop``, ``rrd``, ``figures``,
             ``memory_budget_bytes``, ``tmp_dir``: where a recording over the memory budget is
-            spilled, default the system's temporary directory).
+            spilled, default the system's temporary directory; ``workers``: axes analysed at
+            once, default the usable cores, the same results).
 
     Returns:
         The :class:`AnalysisResult`: SI values per axis; ``to_dict()`` is ``report.json``,
