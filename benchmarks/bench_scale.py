@@ -6,7 +6,8 @@ BulkWriter` in blocks of ``--block-s`` seconds, so the generator never holds mor
 block.  Each axis is white noise (gyro 1e-3 rad/s, accel 3e-3 m/s² per sample) plus a sum of
 three first-order Gauss-Markov processes (time constants 10, 100, 1000 s: a flicker-like
 plateau), their state carried across blocks.  Then ``python -m imupipe analyze FILE`` runs in
-a child process; prints its wall time and peak RSS (``getrusage(RUSAGE_CHILDREN).ru_maxrss``).
+a child process; prints its wall time, CPU time and peak RSS (``getrusage(RUSAGE_CHILDREN)``:
+user + system time, ``ru_maxrss``) and the load average.
 
     python benchmarks/bench_scale.py --hours 2 --rate 1000 --file /tmp/scale_2h.mcap
     python benchmarks/bench_scale.py --file /tmp/scale_24h.mcap      # 24 h / 1 kHz
@@ -15,6 +16,7 @@ a child process; prints its wall time and peak RSS (``getrusage(RUSAGE_CHILDREN)
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import subprocess
 import sys
@@ -106,11 +108,17 @@ def main() -> None:
         )
     out = args.out or args.file.with_suffix(".imupipe")
     cmd = [sys.executable, "-m", "imupipe", "analyze", str(args.file), "--out", str(out), "-q"]
+    load = os.getloadavg()[0]
     t = time.perf_counter()
     subprocess.run([*cmd, *args.analyze_args], check=True)
     wall = time.perf_counter() - t
-    peak_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024 / 1e9
-    print(f"analyze: wall {wall:.1f} s, peak RSS {peak_gb:.2f} GB ({' '.join(cmd[3:])})")
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    peak_gb = usage.ru_maxrss * 1024 / 1e9
+    print(
+        f"analyze: wall {wall:.1f} s, CPU {usage.ru_utime + usage.ru_stime:.1f} s, peak RSS "
+        f"{peak_gb:.2f} GB, load average {load:.1f} -> {os.getloadavg()[0]:.1f} on "
+        f"{os.cpu_count()} cores ({' '.join([*cmd[3:], *args.analyze_args])})"
+    )
 
 
 if __name__ == "__main__":

@@ -58,7 +58,8 @@ def analyze(
         **options: fields of :class:`imupipe.analysis.analyze.AnalyzeOptions` (``topic``,
             ``taus_per_decade``, ``gaps``, ``loop``, ``rrd``, ``figures``,
             ``memory_budget_bytes``, ``tmp_dir``: where a recording over the memory budget is
-            spilled, default the system's temporary directory).
+            spilled, default the system's temporary directory; ``workers``: axes analysed at
+            once, default the usable cores, the same results).
 
     Returns:
         The :class:`AnalysisResult`: SI values per axis; ``to_dict()`` is ``report.json``,
@@ -77,7 +78,9 @@ def analyze(
     opts = analyze_options(**options)
     sheet = None if opts.datasheet is None else load_datasheet(opts.datasheet)
     with StageProgress(quiet=not progress) as bars, staged_output(out_dir) as staging:
-        outputs = ReportOutputs(staging, opts.figures, opts.rrd_full, datasheet=sheet)
+        outputs = ReportOutputs(
+            staging, opts.figures, opts.rrd_full, datasheet=sheet, processes=opts.workers
+        )
         return _run_analysis(Path(path), opts, bars, outputs)
 
 

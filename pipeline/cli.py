@@ -245,6 +245,14 @@ def analyze(
             "once into a temporary on-disk store and analysed one axis at a time (same results).",
         ),
     ] = 2.0,
+    jobs: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="Axes analysed at once, one per thread (default: the cores this process may "
+            "use; fewer when --memory-budget-gb has no room for more). Same results.",
+        ),
+    ] = None,
     tmp_dir: Annotated[
         Path | None,
         typer.Option(
@@ -305,6 +313,7 @@ def analyze(
         tmp_dir=tmp_dir,
         datasheet=datasheet,
         temperature_topic=temperature_topic,
+        workers=jobs,
     )
     if topic != ALL_TOPICS:
         _analyze_one(path, out_dir, options, quiet, exporting)

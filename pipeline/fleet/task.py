@@ -80,8 +80,10 @@ def _worker_memory_limit() -> int | None:
 
 
 def budget_for_worker(options: AnalyzeOptions, memory_limit: int | None) -> AnalyzeOptions:
-    """``options`` with the memory budget lowered to :data:`WORKER_MEMORY_SHARE` of the
-    worker's limit when that is smaller."""
+    """``options`` for one Dask worker: one axis at a time (a worker is one core:
+    :data:`imupipe.fleet.cluster.SINGLE_THREAD_ENV`), and the memory budget lowered to
+    :data:`WORKER_MEMORY_SHARE` of the worker's limit when that is smaller."""
+    options = replace(options, workers=1)
     if memory_limit is None:
         return options
     cap = int(WORKER_MEMORY_SHARE * memory_limit)
@@ -122,7 +124,9 @@ def analyze_unit(rec: Recording, out_root: str, options: AnalyzeOptions) -> Unit
     opts = replace(budget_for_worker(options, _worker_memory_limit()), compile_ahead=False)
     try:
         sheet = None if opts.datasheet is None else load_datasheet(opts.datasheet)
-        outputs = ReportOutputs(staging, opts.figures, opts.rrd_full, datasheet=sheet)
+        outputs = ReportOutputs(
+            staging, opts.figures, opts.rrd_full, datasheet=sheet, processes=opts.workers
+        )
         with local_copy(rec) as path:  # the outputs name the URL, not the temporary copy
             label = None if rec.local else rec.location
             result = run_analysis(path, opts, StageProgress(quiet=True), outputs, label)

@@ -50,6 +50,9 @@ frames, 0.87-0.91 GB)."""
 FALLBACK_BYTES_PER_FRAME = 40
 """Without a readable MCAP summary, frames are estimated as file bytes / this (a ROS Imu message
 is ~350 bytes and our ADIS frame ~60 before compression; zstd shrinks them at most ~8×)."""
+SPILLED_PEAK_BYTES_PER_FRAME = 21
+"""Peak RSS of the spilled source's analysis per decoded frame, one axis at a time (measured:
+24 h / 1 kHz, 86.4 M frames, 1.81 GB with the kernels compiled, docs/performance.md)."""
 SPILL_BYTES_PER_FRAME = 65
 """Disk a spilled frame takes at most: ROS Imu, two int64 time bases, six float64 axes and a
 1-byte NaN flag (an ADIS16364 frame, in integer counts, takes 41)."""
@@ -144,8 +147,14 @@ class ColumnSource(ABC):
         """The raw :data:`SIGNALS` over ``rows`` for the Rerun recording."""
 
     @abstractmethod
-    def notes(self, frames: int, rrd: bool) -> list[str]:
-        """Warnings for the report about how the data of a segment of ``frames`` was read."""
+    def peak_bytes(self, frames: int) -> int:
+        """Estimated peak memory of analysing a recording of ``frames`` decoded frames from this
+        source, one axis at a time."""
+
+    @abstractmethod
+    def notes(self, frames: int, rrd: bool, at_once: int = 1) -> list[str]:
+        """Warnings for the report about how the data of a segment of ``frames`` was read
+        (``at_once``: axes analysed at the same time)."""
 
 
 class InMemoryColumns(ColumnSource):
@@ -165,7 +174,10 @@ class InMemoryColumns(ColumnSource):
     def signals(self, rows: slice) -> pl.DataFrame:
         return self.rec.frames.slice(rows.start, rows.stop - rows.start)
 
-    def notes(self, frames: int, rrd: bool) -> list[str]:
+    def peak_bytes(self, frames: int) -> int:
+        return PEAK_BYTES_PER_FRAME * frames
+
+    def notes(self, frames: int, rrd: bool, at_once: int = 1) -> list[str]:
         return []
 
 
@@ -207,11 +219,15 @@ class SpilledColumns(ColumnSource):
                 shown[name] = envelope(x)
         return pl.DataFrame(shown)
 
-    def notes(self, frames: int, rrd: bool) -> list[str]:
+    def peak_bytes(self, frames: int) -> int:
+        return SPILLED_PEAK_BYTES_PER_FRAME * frames
+
+    def notes(self, frames: int, rrd: bool, at_once: int = 1) -> list[str]:
+        axes = "one axis" if at_once == 1 else f"{at_once} axes"
         out = [
             f"low-memory path: the whole frame would need ~{self.estimate / 1e9:.2f} GB (budget "
             f"{self.budget / 1e9:.2f} GB); decoded once into a temporary on-disk store "
-            f"({self.disk_bytes() / 1e9:.2f} GB) and analysed one axis at a time"
+            f"({self.disk_bytes() / 1e9:.2f} GB) and analysed {axes} at a time"
         ]
         if rrd and frames > 2 * ENVELOPE_BINS:
             out.append(

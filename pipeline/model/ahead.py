@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import threading
 from types import TracebackType
 
 import numpy as np
@@ -58,17 +59,20 @@ class Ahead:
 
     def __init__(self, child: subprocess.Popen | None) -> None:
         self.child = child
+        self._waiting = threading.Lock()
 
     def wait(self) -> None:
-        """Wait for the child (at most :data:`WAIT_S`, then stop it); idempotent."""
-        if self.child is None:
-            return
-        try:
-            self.child.wait(WAIT_S)
-        except subprocess.TimeoutExpired:
-            self.child.kill()
-            self.child.wait()
-        self.child = None
+        """Wait for the child (at most :data:`WAIT_S`, then stop it); idempotent, and safe to
+        call from the threads that analyse the axes at once."""
+        with self._waiting:
+            if self.child is None:
+                return
+            try:
+                self.child.wait(WAIT_S)
+            except subprocess.TimeoutExpired:
+                self.child.kill()
+                self.child.wait()
+            self.child = None
 
     def __enter__(self) -> Ahead:
         return self

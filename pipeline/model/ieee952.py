@@ -129,7 +129,7 @@ def octave_index(tau: np.ndarray) -> np.ndarray:
     return np.asarray(keep)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _passive_lstsq(
     a: np.ndarray, b: np.ndarray, passive: np.ndarray
 ) -> np.ndarray:  # pragma: no cover (JIT)
@@ -184,7 +184,7 @@ def _passive_lstsq(
     return z
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _gradient(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:  # pragma: no cover (JIT)
     """aᵀ(b − a x): the negative gradient of ½‖a x − b‖², the dual vector of the NNLS KKT
     conditions (loops: no BLAS call overhead on these tiny systems)."""
@@ -199,7 +199,7 @@ def _gradient(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:  # pra
     return w
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _nnls(
     a: np.ndarray, b: np.ndarray, maxiter: int, guess: np.ndarray
 ) -> np.ndarray:  # pragma: no cover (JIT)
@@ -263,7 +263,7 @@ def _nnls(
     return x
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _deviance(
     avar: np.ndarray, model: np.ndarray, edf: np.ndarray
 ) -> float:  # pragma: no cover (JIT)
@@ -275,7 +275,7 @@ def _deviance(
     return total
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _fit_gamma(
     design: np.ndarray, avar: np.ndarray, edf: np.ndarray, offset: np.ndarray
 ) -> tuple[np.ndarray, float]:  # pragma: no cover (JIT)
@@ -320,7 +320,7 @@ def _fit_gamma(
     return coef / scale, dev
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _fit_designs(
     designs: np.ndarray, avar: np.ndarray, edf: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover (JIT)

@@ -13,6 +13,8 @@
 
 from __future__ import annotations
 
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import matplotlib
@@ -136,12 +138,29 @@ def loop_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None:
     return path
 
 
-def write_figures(result: AnalysisResult, out_dir: Path) -> dict[str, Path]:
-    """Write every figure that applies into ``out_dir``; returns {caption: path}."""
+def sensor_figures(result: AnalysisResult, sensor: str, out_dir: Path) -> dict[str, Path]:
+    """Write the figures of one sensor that apply into ``out_dir``; returns {caption: path}."""
     written: dict[str, Path] = {}
-    for sensor in ("gyro", "accel"):
-        for kind, make in (("allan", allan_figure), ("loop", loop_figure)):
-            path = make(result, sensor, Path(out_dir) / f"{kind}_{sensor}.png")
-            if path is not None:
-                written[f"{_TITLES[sensor]}: {kind}"] = path
+    for kind, make in (("allan", allan_figure), ("loop", loop_figure)):
+        path = make(result, sensor, Path(out_dir) / f"{kind}_{sensor}.png")
+        if path is not None:
+            written[f"{_TITLES[sensor]}: {kind}"] = path
     return written
+
+
+def write_figures(result: AnalysisResult, out_dir: Path, processes: int = 1) -> dict[str, Path]:
+    """Write every figure that applies into ``out_dir``; returns {caption: path}, gyroscopes
+    first.  With ``processes`` > 1 (and ``fork`` available) the accelerometers' figures are
+    drawn in a forked child while this process draws the gyroscopes' (matplotlib holds the
+    GIL, so a thread would not draw at the same time); the child's error is raised here, and
+    the child has ended when this returns, however it returns."""
+    if processes < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return {
+            **sensor_figures(result, "gyro", out_dir),
+            **sensor_figures(result, "accel", out_dir),
+        }
+    fork = multiprocessing.get_context("fork")
+    with ProcessPoolExecutor(1, mp_context=fork) as child:
+        accel = child.submit(sensor_figures, result, "accel", Path(out_dir))
+        gyro = sensor_figures(result, "gyro", out_dir)
+        return {**gyro, **accel.result()}

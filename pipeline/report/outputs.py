@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import polars as pl
 
 from imupipe.analysis.results import AnalysisResult
+from imupipe.analysis.workers import usable_cores
 from imupipe.progress import StageProgress
 from imupipe.report.report import write_report
 
@@ -32,8 +33,11 @@ class ReportOutputs:
         figures: bool = True,
         rrd_full: bool = False,
         datasheet: Datasheet | None = None,
+        processes: int | None = None,
     ) -> None:
         self.out_dir = Path(out_dir)
+        self.processes = usable_cores() if processes is None else processes
+        """Processes drawing the figures (default: the usable cores)."""
         self.figures = figures
         self.rrd_full = rrd_full
         self.datasheet = datasheet
@@ -47,7 +51,9 @@ class ReportOutputs:
 
     def finish(self, result: AnalysisResult, progress: StageProgress) -> None:
         with progress.stage("report", 2 if self.rrd else 1, "files") as advance:
-            write_report(result, self.out_dir, figures=self.figures, datasheet=self.datasheet)
+            write_report(
+                result, self.out_dir, self.figures, self.datasheet, processes=self.processes
+            )
             advance(1)
             if self.rrd:
                 self.rrd.finish(result)

@@ -352,8 +352,10 @@ def write_report(
     out_dir: Path,
     figures: bool = True,
     datasheet: Datasheet | None = None,
+    processes: int = 1,
 ) -> dict:
-    """Write report.json, report.md (+ PNG figures), imu.yaml and allan.parquet into ``out_dir``.
+    """Write report.json, report.md (+ PNG figures), imu.yaml and allan.parquet into ``out_dir``
+    (``processes``: :func:`imupipe.report.figures.write_figures`).
 
     Returns the report.json document.
     """
@@ -366,7 +368,7 @@ def write_report(
         # imported here: matplotlib (~26 MB resident) stays out of the analysis' memory peak
         from imupipe.report.figures import write_figures
 
-        pngs = write_figures(result, out_dir)
+        pngs = write_figures(result, out_dir, processes)
     (out_dir / "report.md").write_text(report_markdown(result, pngs, datasheet))
     write_exports(doc, ["kalibr"], out_dir)
     allan_frame(result).write_parquet(out_dir / "allan.parquet")

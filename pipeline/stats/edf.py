@@ -45,7 +45,7 @@ _TABLE2_D2 = {2: (35.0 / 18.0, 1.0), 1: (790.0, 410.0), 0: (2.0 / 3.0, 1.0 / 3.0
 _TABLE3_D2 = (15.23, 12.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _value(src: np.ndarray, m: int, phase: bool, t: int) -> float:  # pragma: no cover (JIT)
     """u_t, the t-th value of the series identified: u_t = x[(t+1) m] - x[t m] (m times the
     t-th non-overlapping m-averaged frequency, NIST SP 1065 eq. (2); the factor does not change
@@ -53,7 +53,7 @@ def _value(src: np.ndarray, m: int, phase: bool, t: int) -> float:  # pragma: no
     return src[(t + 1) * m] - src[t * m] if phase else src[t]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _detrended(
     src: np.ndarray, m: int, phase: bool, line: tuple[float, float], t: int
 ) -> float:  # pragma: no cover (JIT)
@@ -61,7 +61,7 @@ def _detrended(
     return _value(src, m, phase, t) - (line[0] + line[1] * t)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _push(w: np.ndarray, z0: float, k: int) -> None:  # pragma: no cover (JIT)
     """Advance the forward-difference window ``w`` by the k-th detrended value z0 (k = 0, 1, ...).
 
@@ -76,7 +76,7 @@ def _push(w: np.ndarray, z0: float, k: int) -> None:  # pragma: no cover (JIT)
     w[top] = z0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _acf_pass(
     src: np.ndarray,
     m: int,
@@ -114,7 +114,7 @@ def _acf_pass(
     return num, den, acc
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _acf_power(
     src: np.ndarray, m: int, phase: bool, count: int, dmax: int
 ) -> float:  # pragma: no cover (JIT)
@@ -150,7 +150,7 @@ def _acf_power(
     return p
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _acf_noise_id(
     src: np.ndarray, m: int, phase: bool, count: int, dmax: int
 ) -> int:  # pragma: no cover
@@ -158,7 +158,7 @@ def _acf_noise_id(
     return int(np.rint(_acf_power(src, m, phase, count, dmax)))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def acf_noise_id(ybar: np.ndarray, dmax: int = 2) -> int:  # pragma: no cover (JIT)
     """Power-law exponent alpha of the averaged fractional frequencies ``ybar`` by lag-1 ACF.
 
@@ -252,7 +252,7 @@ def b1_noise_id(x: np.ndarray, m: int) -> int:
     return 2 if _mvar_over_avar(x, m) < bound else 1
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(parallel=True, cache=True, nogil=True)
 def _acf_ids(x: np.ndarray, m: np.ndarray, copy_max: int) -> np.ndarray:  # pragma: no cover (JIT)
     """:func:`acf_noise_id` of the m-averaged frequencies for each factor in ``m``, in parallel;
     series of at most ``copy_max`` values are formed once and read contiguously, longer ones
