@@ -69,6 +69,10 @@ RAMP_KINDS = frozenset({"ramp"})
 (projected out) and the Allan model's R term (measured: a 1.1e-7 rad/s² ramp on 1.4 h, GLS
 significant, moved the Allan error 0.747 → 0.737 and the time-domain error by 5e-6).  Only the
 rise rules apply to them; their fall is their own GLS test."""
+SPIKE_KINDS = frozenset({"spike"})
+"""Full-rate corrections the block means keep (the loop's ``y_d`` is not corrected for spikes,
+so the time-domain error cannot see them): neither rule on both errors applies; their own
+family-wise test and :func:`_judge` (the Allan error must fall) decide."""
 
 
 def block_size(n: int, tau0: float) -> int:
@@ -764,7 +768,12 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     def errors(fit_new: ieee952.CompositeFit, new_state: _State, kind: str) -> ErrorChange:
         time_new = time_domain_fit(fit_new, new_state.column_params, new_state.y_d, dt)
         return ErrorChange.between(
-            fit, fit_new, time_old, time_new, kind not in AVAR_ONLY, kind not in RAMP_KINDS
+            fit,
+            fit_new,
+            time_old,
+            time_new,
+            kind not in AVAR_ONLY | SPIKE_KINDS,
+            kind not in RAMP_KINDS | SPIKE_KINDS,
         )
 
     trials = []
