@@ -1,12 +1,13 @@
 """The closed loop of issue 4: fit the IEEE 952 model, read its residual, trace and add effects.
 
 Per axis: fit the composite AVAR model (:mod:`imupipe.model.ieee952`), compute normalised residuals
-and the goodness of fit (error = gamma deviance / dof on the octave-spaced τ of the fitted
-range, p-value calibrated by parametric bootstrap), then try every candidate of
-:mod:`imupipe.model.effects`.  A candidate is accepted only when (1) it is significant — AVAR terms
-(sinusoid, Gauss–Markov): ΔBIC = ΔD/φ − Δk·ln(n_τ) ≥ 10, and a sinusoid's periodogram line
-stands out of its band's noise (:func:`effects.psd_line`, p below :data:`ALPHA`: on a long
-record a sliver of misfit passes ΔBIC, but only a real line passes this); time-domain corrections
+and the goodness of fit (error = gamma deviance / dof on the fitted τ, :func:`ieee952.fit_index`:
+octave-spaced, and every τ from T/8 to T/2 of the analysis' curve; p-value calibrated by
+parametric bootstrap), then try every candidate of :mod:`imupipe.model.effects`.  A candidate
+is accepted only when (1) it is significant — AVAR terms (sinusoid, Gauss–Markov): ΔBIC =
+ΔD/φ − Δk·ln(n_τ) ≥ 10, and a sinusoid's periodogram line stands out of its band's noise
+(:func:`effects.psd_line`, p below :data:`ALPHA`: on a long record a sliver of misfit passes
+ΔBIC, but only a real line passes this); time-domain corrections
 (temperature, supply, bias step, warm-up drift): exact-GLS p-value, whitened by the axis' own
 fitted noise PSD (flicker and rate random walk included) and Bonferroni-adjusted for the
 options searched, below :data:`ALPHA`; spikes: their own family-wise test — (2) it holds out
@@ -39,7 +40,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Literal
 
@@ -94,7 +95,7 @@ class AxisSignals:
 class Goodness:
     """Goodness of fit of one model to one AVAR curve."""
 
-    error: float  # gamma deviance / dof on the octave-spaced τ
+    error: float  # gamma deviance / dof on the fitted τ (ieee952.fit_index)
     deviance: float
     dof: int
     p_value: float
@@ -152,6 +153,20 @@ class LoopResult:
     """:func:`time_domain_error` of the baseline on the series and of the final model on the
     corrected series."""
 
+    def up_to(self, n_tau: int) -> LoopResult:
+        """This result on its first ``n_tau`` τ (the published curve: the loop fits up to T/2,
+        allan.parquet stops at T/4); goodness statistics stay those of the whole fit."""
+        return replace(
+            self,
+            tau_s=self.tau_s[:n_tau],
+            adev_before=self.adev_before[:n_tau],
+            adev_after=self.adev_after[:n_tau],
+            model_adev_before=self.model_adev_before[:n_tau],
+            model_adev_after=self.model_adev_after[:n_tau],
+            before=replace(self.before, z=self.before.z[:n_tau]),
+            after=replace(self.after, z=self.after.z[:n_tau]),
+        )
+
     @property
     def z_before(self) -> np.ndarray:
         return self.before.z
@@ -207,7 +222,15 @@ class _State:
         B into the candidate being judged)."""
         limit = ieee952.flicker_limit(ax.avar_hi(self.avar)) if possible_b else np.inf
         return _fit(
-            ax.tau, self.avar, ax.edf, ax.tau_min, self.columns, None, self.n_nonlinear, limit
+            ax.tau,
+            self.avar,
+            ax.edf,
+            ax.tau_min,
+            self.columns,
+            None,
+            self.n_nonlinear,
+            limit,
+            ax.dense_from,
         )
 
     def terms(self, ax: _Axis) -> ieee952.NoiseTerms:
@@ -233,11 +256,13 @@ def _fit(
     cutoff_hz: float | None = None,
     n_nonlinear: int = 0,
     flicker_max: float = np.inf,
+    dense_from: float = np.inf,
 ) -> ieee952.CompositeFit:
     """Every fit of the loop follows :func:`ieee952.fit_noise_terms`: octave τ ≥ ``tau_min``
     (from :func:`ieee952.fit_start` on the baseline, fixed for the whole loop so that all
-    before/after deviances cover the same points), the signed prefilter 1/τ² column and, for
-    the fits of the whole curve, a possible B (``flicker_max``)."""
+    before/after deviances cover the same points) and every τ ≥ ``dense_from`` (the whole
+    curve's :func:`ieee952.long_tau_start`), the signed prefilter 1/τ² column and, for the fits
+    of the whole curve, a possible B (``flicker_max``)."""
     return ieee952.fit_composite(
         tau,
         avar,
@@ -248,6 +273,7 @@ def _fit(
         tau_min=tau_min,
         prefilter=True,
         flicker_max=flicker_max,
+        dense_from=dense_from,
     )
 
 
@@ -298,11 +324,13 @@ class _Axis:
         self.edf = ieee952.monotone_edf(curve.edf)
         self.avar = np.asarray(curve.adev, dtype=float) ** 2
         self.hi_ratio = ieee952.avar_upper(1.0, self.edf)
+        self.dense_from = ieee952.long_tau_start(curve)
         self.tau_min, self.fit_note = ieee952.fit_start(  # as fit_noise_terms: B possible
             self.tau,
             self.avar,
             self.edf,
             flicker_max=ieee952.flicker_limit(self.avar_hi(self.avar)),
+            dense_from=self.dense_from,
         )
         self.block = block_size(len(sig.y), sig.tau0)
         self.dt = self.block * sig.tau0
@@ -409,11 +437,14 @@ def _column_name(kind: str, state: _State) -> str | None:
     return "narrowband" if not lines else f"narrowband_{len(lines) + 1}"
 
 
-def _column_fits(tau, avar, edf, tau_min, columns, kind, specs, n_nonlinear, cutoff_hz=None):
+def _column_fits(
+    tau, avar, edf, tau_min, columns, kind, specs, n_nonlinear, cutoff_hz=None, dense_from=np.inf
+):
     """(shape parameters, fit) of an extra ``kind`` AVAR column at every spec of ``specs``,
     with the flicker cut-off of the fit without it (``cutoff_hz`` when that fit is known)."""
     if cutoff_hz is None:
-        cutoff_hz = _fit(tau, avar, edf, tau_min, columns, None, n_nonlinear).cutoff_hz
+        fit = _fit(tau, avar, edf, tau_min, columns, None, n_nonlinear, dense_from=dense_from)
+        cutoff_hz = fit.cutoff_hz
     shape = _shape(kind)
     return [
         (
@@ -426,6 +457,7 @@ def _column_fits(tau, avar, edf, tau_min, columns, kind, specs, n_nonlinear, cut
                 columns | {"_new": shape(tau, spec)},
                 cutoff_hz,
                 n_nonlinear + N_SHAPE[kind],
+                dense_from=dense_from,
             ),
         )
         for spec in specs
@@ -550,6 +582,7 @@ def _narrowband_refine(
         specs,
         state.n_nonlinear,
         cutoff_hz,
+        ax.dense_from,
     )
     best, fit = _best(fits)
     return best, fits, fit, evidence
@@ -796,7 +829,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         if kind == "narrowband":  # specs: coarse (centre, width) away from the modelled lines
             seeds = _column_fits(
                 tau, state.avar, edf, ax.tau_min, state.columns, kind, specs,
-                state.n_nonlinear, fit.cutoff_hz,
+                state.n_nonlinear, fit.cutoff_hz, ax.dense_from,
             )  # fmt: skip
             spec, fits, fit_new, centre = _narrowband_refine(
                 ax, state, _best(seeds)[0], fit.cutoff_hz
@@ -812,6 +845,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
                 specs,
                 state.n_nonlinear,
                 fit.cutoff_hz,
+                ax.dense_from,
             )
             spec, fit_new = _best(fits)
             centre = None
@@ -984,7 +1018,13 @@ def _column_candidate(kind, spec, fit_new, state, ax) -> effects.Candidate:
         f0 = line.get("frequency_hz", p)
     column = effects.sinusoid_avar(tau, f0)
     refit = _fit(
-        tau, state.avar, edf, ax.tau_min, state.columns | {"_new": column}, fit_new.cutoff_hz
+        tau,
+        state.avar,
+        edf,
+        ax.tau_min,
+        state.columns | {"_new": column},
+        fit_new.cutoff_hz,
+        dense_from=ax.dense_from,
     )
     lo, hi = refit.profile_interval(state.avar, edf, refit.names.index("_new"))
     amp = float(np.sqrt(refit.coef[refit.names.index("_new")]))
