@@ -44,7 +44,7 @@ from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
 from imupipe.progress import StageProgress
 from imupipe.stats import robust
-from imupipe.stats.allan import AllanCurve, allan_curves, tau_factors
+from imupipe.stats.allan import FIT_MIN_TERMS, AllanCurve, allan_curves, tau_factors
 from imupipe.stats.edf import b1_noise_id
 from imupipe.vocab import AXES, sensor_of
 
@@ -139,7 +139,8 @@ def axis_result(
     excluded: np.ndarray | None = None,
 ) -> AxisResult:
     """Stage 4 (+ loop) of one axis: outliers excised (:func:`excise_outliers`), mean, rms, the
-    closed loop and the final model (the loop's, or the IEEE 952 fit without the loop)
+    closed loop and the final model (the loop's, or the IEEE 952 fit without the loop), both
+    fitted on ``curve`` (up to T/2, :data:`FIT_MIN_TERMS`) and published up to T/4
     (``temp_d``, ``supply_d``: the segment's temperature and supply as
     :func:`imupipe.model.loop.aux_block_means`; ``excluded``: the samples masked by the
     ``"mask"`` gap policy, left out of mean and rms too)."""
@@ -150,15 +151,16 @@ def axis_result(
         name, sensor, y, tau0_s, temp_d, supply_d, excluded, spike_free=outliers is None
     )
     looped = close_loop(signals, curve) if loop else None
+    published = curve.up_to(tau0_s * (len(y) // 4))  # Stable32's T/4 (the fit's reaches T/2)
     return AxisResult(
         name=name,
         sensor=sensor,
         unit="rad/s" if sensor == "gyro" else "m/s^2",
         mean=float(y.mean(where=usable) if usable is not None else y.mean()),
         rms=float(y.std(where=usable) if usable is not None else y.std()),
-        curve=curve,
+        curve=published,
         terms=fit_noise_terms(curve, sensor) if looped is None else looped.terms_after,
-        loop=looped,
+        loop=None if looped is None else looped.up_to(len(published.tau_s)),
         outliers=outliers,
     )
 
@@ -275,7 +277,7 @@ def analyze_axes(
     for name in HOUSEKEEPING:
         x = source.column(name, rows)
         aux[name] = aux_block_means(None if x is None else series.on_grid(x), tau0)
-    m = tau_factors(series.samples, per_decade=options.taus_per_decade)
+    m = tau_factors(series.samples, options.taus_per_decade, FIT_MIN_TERMS)  # T/2: the fit's
     reading = threading.Lock()  # the spilled source maps one column at a time
 
     def axis(name: str) -> np.ndarray:

@@ -16,7 +16,9 @@ with identity link and non-negative coefficients.  Each AVAR estimate is ~ σ²�
 the curve's equivalent degrees of freedom (Greenhall), i.e. gamma with shape ν/2; we minimise
 the gamma deviance D = Σ ν (â/a − ln(â/a) − 1) by iteratively re-weighted non-negative least
 squares, on octave-spaced τ (neighbouring overlapping-AVAR points are strongly correlated, so a
-dense grid would over-count the evidence).  Intervals are profile-likelihood intervals
+dense grid would over-count the evidence) — and on a curve beyond T/4 on every τ of its last
+two octaves, where the long-τ terms live and each point's small edf keeps its weight small
+(:func:`fit_index`).  Intervals are profile-likelihood intervals
 (ΔD ≤ φ·χ²₁(0.95), quasi-likelihood dispersion φ = max(1, D/dof)).
 
 Short τ and the sensor's prefilter.  A rate series with autocovariance r(k) = 0 for k ≥ L (white
@@ -127,6 +129,36 @@ def octave_index(tau: np.ndarray) -> np.ndarray:
         if tau[i] >= 2.0 * tau[keep[-1]] * (1 - 1e-9):
             keep.append(i)
     return np.asarray(keep)
+
+
+LONG_TAU_OCTAVES = 2.0
+"""A curve beyond Stable32's T/4 (the analysis' fit curve reaches T/2, ``FIT_MIN_TERMS`` of
+:mod:`imupipe.stats.allan`) is fitted at every τ of its last this many octaves: from T/8."""
+
+
+def long_tau_start(curve: AllanCurve) -> float:
+    """τ (s) from which the fit reads every τ of ``curve`` (:func:`fit_index`): T/8 when the
+    curve reaches beyond T/4 — its last τ holds fewer than 45 % of the first τ's terms (N − 2m
+    against N − 2: m > 0.275 N) — else ∞ (octave points only, the fit of a T/4 curve)."""
+    terms = np.asarray(curve.n_terms, dtype=float)
+    if terms.size < 2 or terms[-1] >= 0.45 * terms[0]:
+        return np.inf
+    return float(curve.tau_s[-1]) / 2.0**LONG_TAU_OCTAVES
+
+
+def fit_index(tau: np.ndarray, first: int = 0, dense_from: float = np.inf) -> np.ndarray:
+    """Indices of the fitted τ from index ``first``: the octave-spaced subset, and every τ ≥
+    ``dense_from`` (s; :func:`long_tau_start`).
+
+    At short τ the overlapping-AVAR points of a dense grid are strongly correlated and have
+    large edf, so the octave subset keeps the evidence honest.  At the long end the rate random
+    walk K and the rate ramp R live: a ramp is a slope +1 rise of the ADEV over the longest τ,
+    which one or two octave points (where they happen to fall) barely show.  There every τ up
+    to T/2 is fitted, each weighted by its own Greenhall edf in the gamma deviance — a τ with
+    edf ~1 (T/2) counts little (issue 13, item 6)."""
+    idx = first + octave_index(tau[first:])
+    tail = np.flatnonzero(tau >= dense_from * (1 - 1e-9))
+    return np.union1d(idx, tail[tail >= first])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -469,8 +501,10 @@ def fit_composite(
     tau_min: float = 0.0,
     prefilter: bool = False,
     flicker_max: float = np.inf,
+    dense_from: float = np.inf,
 ) -> CompositeFit:
-    """Fit the IEEE 952 model (+ ``extra`` AVAR columns) on octave-spaced τ ≥ ``tau_min`` (s).
+    """Fit the IEEE 952 model (+ ``extra`` AVAR columns) on octave-spaced τ ≥ ``tau_min`` (s)
+    and every τ ≥ ``dense_from`` (s, :func:`fit_index`).
 
     The flicker cut-off f0 is profiled over :func:`cutoff_grid` unless given; with
     ``prefilter`` also the sign of the 3/τ² column over ±1 (quantisation or the prefilter's
@@ -485,7 +519,7 @@ def fit_composite(
     extra = extra or {}
     tau = np.ascontiguousarray(tau, dtype=float)
     first = int(np.searchsorted(tau, tau_min * (1 - 1e-9)))
-    idx = first + octave_index(tau[first:])
+    idx = fit_index(tau, first, dense_from)
     names = TERM_NAMES + tuple(extra)
     grid = cutoff_grid(tau) if cutoff_hz is None else np.array([cutoff_hz], dtype=float)
     flicker = _flicker_table(tau.tobytes(), grid.tobytes())
@@ -528,6 +562,7 @@ def fit_start(
     level: float = 0.999,
     prefilter: bool = True,
     flicker_max: float = np.inf,
+    dense_from: float = np.inf,
 ) -> tuple[float, str]:
     """Smallest τ (s) from which the composite model holds, and why (deletion tests).
 
@@ -539,10 +574,10 @@ def fit_start(
     resonance at short τ does not inflate the yardstick, and a misfit at long τ that the loop
     treats inflates it for every point alike; ΔD ~ φ χ²₁ under the model, the quasi-likelihood
     deletion test of McCullagh & Nelder, §9.2).  Whatever lies below that start is left out;
-    the fitted range is the one where the model holds point by point.  ``prefilter`` and
-    ``flicker_max`` as in :func:`fit_composite`.  Returns (tau_min, note).
+    the fitted range is the one where the model holds point by point.  ``prefilter``,
+    ``flicker_max`` and ``dense_from`` as in :func:`fit_composite`.  Returns (tau_min, note).
     """
-    fit, note = _start_fit(tau, avar, edf, extra, level, prefilter, flicker_max)
+    fit, note = _start_fit(tau, avar, edf, extra, level, prefilter, flicker_max, dense_from)
     return float(tau[fit.fit_index[0]]), note
 
 
@@ -554,16 +589,16 @@ def _start_fit(
     level: float,
     prefilter: bool,
     flicker_max: float = np.inf,
+    dense_from: float = np.inf,
 ) -> tuple[CompositeFit, str]:
     """:func:`fit_start`, returning the fit from the chosen τ (= ``fit_composite`` with that
     ``tau_min``) instead of only its first τ."""
     limit = chi2_ppf_1dof(level)
     idx = octave_index(tau)
-    fits = [fit_composite(tau, avar, edf, extra, prefilter=prefilter, flicker_max=flicker_max)]
+    policy = {"prefilter": prefilter, "flicker_max": flicker_max, "dense_from": dense_from}
+    fits = [fit_composite(tau, avar, edf, extra, **policy)]
     for s in range(1, max(len(idx) // 3, 1) + 1):
-        rest = fit_composite(
-            tau, avar, edf, extra, tau_min=tau[idx[s]], prefilter=prefilter, flicker_max=flicker_max
-        )
+        rest = fit_composite(tau, avar, edf, extra, tau_min=tau[idx[s]], **policy)
         if rest.dof < 3:
             break
         fits.append(rest)
@@ -839,5 +874,7 @@ def fit_noise_terms(curve: AllanCurve, sensor: Literal["gyro", "accel"]) -> Nois
     tau = np.asarray(curve.tau_s, dtype=float)
     edf = monotone_edf(curve.edf)
     avar_hi = avar_upper(avar, edf)
-    fit, note = _start_fit(tau, avar, edf, None, 0.999, True, flicker_limit(avar_hi))
+    fit, note = _start_fit(
+        tau, avar, edf, None, 0.999, True, flicker_limit(avar_hi), long_tau_start(curve)
+    )
     return terms_from_fit(fit, avar, edf, sensor, note, avar_hi)

@@ -31,6 +31,10 @@ import numpy as np
 from imupipe.jit import kernel_input
 from imupipe.stats.edf import chi2_interval, edf_oadev, noise_ids
 
+FIT_MIN_TERMS = 2
+"""``min_terms`` of the τ grid the noise fit reads (:func:`tau_factors`: up to T/2); the curve
+users read (allan.parquet, figures) stops at Stable32's T/4 (the default ``min_terms`` 4)."""
+
 PHASE_BUDGET_BYTES = 64 << 20
 """Phase memory for axes processed together; longer records are processed axis by axis.  Axis
 by axis costs nothing in speed (the sums are spread over the cores per tau): 12 h at 100 Hz,
@@ -46,7 +50,9 @@ def tau_factors(n: int, per_decade: int = 10, min_terms: int = 4) -> np.ndarray:
     per decade wherever a decade holds that many integers.  Longest m: the record must hold
     at least ``min_terms`` non-overlapping intervals of length m, m <= n // min_terms.  The
     default 4 is Stable32's limit (tau <= T/4), where the overlapping ADEV still has a few
-    equivalent degrees of freedom (>= ~2 for white FM, Greenhall & Riley 2003).
+    equivalent degrees of freedom (>= ~2 for white FM, Greenhall & Riley 2003); 2 reaches
+    T/2, the longest τ with a term (edf ~1), which the noise fit reads for its long-τ terms
+    (:data:`FIT_MIN_TERMS`).  The grid of a smaller ``min_terms`` extends the larger one's.
     """
     m_max = n // min_terms
     if m_max < 1:
@@ -356,6 +362,13 @@ class AllanCurve:
     n_terms: np.ndarray
     alpha: np.ndarray
     confidence: float
+
+    def up_to(self, tau_max_s: float) -> AllanCurve:
+        """This curve at τ ≤ ``tau_max_s`` (s) only (every point's value, edf and noise type
+        depend on its own τ alone, so the prefix equals the curve computed on that range)."""
+        keep = self.tau_s <= tau_max_s * (1 + 1e-9)
+        fields = (self.tau_s, self.adev, self.adev_lo, self.adev_hi, self.edf, self.n_terms)
+        return AllanCurve(*(f[keep] for f in fields), self.alpha[keep], self.confidence)
 
 
 def edf_runs(alpha: int, m: int, runs: np.ndarray) -> float:

@@ -37,6 +37,8 @@ class Curve:
         self.tau_s = np.array(entry["tau_s"], dtype=float)
         self.adev = np.array(entry["adev"], dtype=float)
         self.edf = np.array([np.nan if v is None else v for v in entry["edf"]], dtype=float)
+        # stored T/4 curves: as many terms at every τ stands for "within T/4" (octave points)
+        self.n_terms = np.full(self.tau_s.size, 10**6)
 
 
 def upper95(curve: Curve) -> np.ndarray:

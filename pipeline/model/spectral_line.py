@@ -1,0 +1,132 @@
+"""The spectrum's view of a spread line's centre: a Whittle fit of the damped oscillator's PSD.
+
+A narrowband vibration (:func:`imupipe.model.effects.oscillator_avar`) is a random process, not
+a tone: its periodogram's strongest bin scatters over about half the line's width from one
+record to the next, so the Cramér–Rao interval of a sinusoid (:func:`effects.psd_line`, a
+fraction of a bin wide) does not hold for it.  Its centre is estimated here from the line's
+whole shape: the periodogram ordinates I_k (every second Hann bin,
+:func:`effects.hann_periodogram`, nearly independent, each ~ S(f_k) χ²₂/2) against
+
+    S(f) = c_white + c_flicker / f + P · S_osc(f; f0, w),   c_white, c_flicker, P ≥ 0,
+
+by the Whittle likelihood (Whittle 1953), whose deviance is the gamma deviance with ν = 2 per
+ordinate — :func:`ieee952.fit_nonneg_gamma` with the three linear coefficients free.  The 95 %
+interval of f0 is the profile interval over the width: {f0 : min_w D(f0, w) − D_min ≤
+φ χ²₁(0.95)}, φ = max(1, D_min / dof) (a misfit of the shape widens it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize
+
+from imupipe.model import ieee952
+from imupipe.vocab import CHI2_95
+
+CENTRE_SPAN = 8.0  # an interval edge beyond the estimate ± this many widths is censored there
+WIDTH_SPAN = 8.0  # the profile's width: within the estimate / … × this factor
+FINE_BAND = 15.0  # the profile's ordinates: within this many best widths of the best centre
+WHITTLE_EDF = 2.0  # a periodogram ordinate is S χ²₂ / 2
+
+
+def oscillator_psd(f: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
+    """Two-sided PSD (1/Hz) at ``f`` (Hz) of the unit-variance damped oscillator of
+    :func:`effects.oscillator_avar`: S(f) = 4aω0² / ((ω0² − ω²)² + 4a²ω²), ω = 2πf,
+    a = π ``width_hz`` (full width at half power), ω0² = (2π ``f0``)² + a² (Papoulis §10)."""
+    a = np.pi * width_hz
+    w0_sq = (2 * np.pi * f0) ** 2 + a * a
+    w_sq = (2 * np.pi * np.asarray(f, dtype=float)) ** 2
+    return 4 * a * w0_sq / ((w0_sq - w_sq) ** 2 + 4 * a * a * w_sq)
+
+
+def _deviance(freqs: np.ndarray, power: np.ndarray, floor: np.ndarray, f0: float, w: float):
+    """Whittle deviance of the ordinates against the floor columns plus the line at (f0, w)."""
+    design = np.column_stack([floor, oscillator_psd(freqs, f0, w)])
+    return ieee952.fit_nonneg_gamma(design, power, np.full(power.size, WHITTLE_EDF))[1]
+
+
+@dataclass(frozen=True)
+class LineCentre:
+    """A spread line's centre (Hz) with its 95 % Whittle profile interval, the width (Hz) at
+    the best centre, the dispersion φ and the number of ordinates fitted."""
+
+    frequency_hz: float
+    lo: float
+    hi: float
+    width_hz: float
+    dispersion: float
+    ordinates: int
+
+    def as_evidence(self) -> dict[str, float]:
+        """The fit as report.json evidence (SI: Hz)."""
+        return {
+            "frequency_hz": self.frequency_hz,
+            "frequency_lo": self.lo,
+            "frequency_hi": self.hi,
+            "width_hz": self.width_hz,
+            "dispersion": self.dispersion,
+            "ordinates": self.ordinates,
+        }
+
+
+def line_centre(
+    freqs: np.ndarray, power: np.ndarray, seed_hz: float, widths: np.ndarray
+) -> LineCentre | None:
+    """Centre of the spread line near ``seed_hz`` (Hz) in the periodogram ordinates
+    (``freqs`` Hz, ``power``): a coarse search over ``widths`` (Hz) × centres ``seed_hz`` ± two
+    widths; then, on the ordinates within :data:`FINE_BAND` widths of it, the Whittle estimate
+    of (centre, width) (Nelder–Mead) and the centre's profile interval — the width minimised
+    (bounded, within a factor :data:`WIDTH_SPAN` of the estimate) at each centre, each edge found
+    by bracketing and Brent's root finder.  ``None`` when the band holds fewer than 8 ordinates.
+    """
+    if power.size < 8:
+        return None
+    floor = np.column_stack([np.ones_like(freqs), 1.0 / freqs])
+    coarse = [
+        (c, w)
+        for w in widths
+        for c in seed_hz + w * np.linspace(-2, 2, 9)
+        if freqs[0] < c < freqs[-1]
+    ]
+    c1, w1 = min(coarse, key=lambda cw: _deviance(freqs, power, floor, *cw))
+    near = np.abs(freqs - c1) <= FINE_BAND * w1  # the line and its shoulders
+    if near.sum() >= 8:
+        freqs, power, floor = freqs[near], power[near], floor[near]
+
+    def joint(p: np.ndarray) -> float:  # (centre offset in units of w1, ln(width / w1))
+        return _deviance(freqs, power, floor, c1 + p[0] * w1, w1 * np.exp(p[1]))
+
+    start = optimize.minimize(joint, [0.0, 0.0], method="Nelder-Mead",
+                              options={"xatol": 1e-3, "fatol": 1e-4})  # fmt: skip
+    c_hat, w_hat = c1 + start.x[0] * w1, w1 * float(np.exp(start.x[1]))
+
+    def profile(c: float) -> float:  # min over the width of the deviance at centre c
+        res = optimize.minimize_scalar(
+            lambda lw: _deviance(freqs, power, floor, c, w_hat * np.exp(lw)),
+            bounds=(-np.log(WIDTH_SPAN), np.log(WIDTH_SPAN)),
+            method="bounded",
+            options={"xatol": 1e-3},
+        )
+        return min(float(res.fun), _deviance(freqs, power, floor, c, w_hat))
+
+    d_min = min(profile(c_hat), float(start.fun))
+    dof = max(power.size - 5, 1)  # three linear coefficients, centre and width
+    phi = max(1.0, d_min / dof)
+
+    def excess(c: float) -> float:  # > 0 outside the 95 % interval
+        return (profile(c) - d_min) / phi - CHI2_95
+
+    edges = []
+    for sign in (-1.0, 1.0):
+        inner, step = c_hat, 0.05 * w_hat
+        while True:
+            outer = c_hat + sign * step
+            if excess(outer) > 0 or step > CENTRE_SPAN * w_hat:
+                break
+            inner, step = outer, 2 * step
+        a, b = sorted((inner, outer))
+        inside = excess(outer) <= 0  # censored at CENTRE_SPAN widths
+        edges.append(outer if inside else optimize.brentq(excess, a, b, xtol=1e-4 * w_hat))
+    return LineCentre(float(c_hat), float(edges[0]), float(edges[1]), w_hat, phi, int(power.size))

@@ -1,0 +1,70 @@
+"""Issue 13, item 6: the noise fit reads every τ up to T/2 for the long-τ terms (rate random walk
+K, rate ramp R); the published curve stays Stable32's T/4."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imupipe.model import ieee952
+from imupipe.stats.allan import FIT_MIN_TERMS, allan_curves, tau_factors
+
+TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
+
+
+def ramped(seed: int, paper_gyro, size: float = 3.0) -> tuple[np.ndarray, float]:
+    """The paper's gyro noise plus a ramp whose ADEV at T/4 is ``size`` × the noise's there
+    (benchmarks/independent_generator.py's rule); returns (rate, slope rad/s²)."""
+    y = paper_gyro.rate(N, TAU0, np.random.default_rng(seed))
+    duration = N * TAU0
+    slope = size * allan_curves(y, TAU0)[0].adev[-1] / (duration / 4) * np.sqrt(2)
+    return y + slope * (np.arange(N) * TAU0 - duration / 2), slope
+
+
+def test_the_fit_grid_extends_the_published_one_to_half_the_record():
+    published, fitted = tau_factors(N), tau_factors(N, min_terms=FIT_MIN_TERMS)
+    assert published[-1] <= N // 4 < fitted[-1] <= N // 2  # Stable32's T/4; T/2
+    assert fitted[-1] > 10**-0.1 * (N // 2)  # the grid's last point below T/2 (10 a decade)
+    assert np.array_equal(fitted[: published.size], published)
+
+
+def test_the_published_curve_is_the_t4_curve_bit_for_bit(paper_gyro):
+    y = paper_gyro.rate(2**14, TAU0, np.random.default_rng(3))
+    long = allan_curves(y, TAU0, tau_factors(y.size, min_terms=2))[0]
+    short = allan_curves(y, TAU0)[0]
+    cut = long.up_to(TAU0 * (y.size // 4))
+    for name in ("tau_s", "adev", "adev_lo", "adev_hi", "edf", "n_terms", "alpha"):
+        assert np.array_equal(getattr(cut, name), getattr(short, name)), name
+    assert long.tau_s.size > short.tau_s.size
+
+
+def test_every_tau_from_t8_is_fitted_only_on_a_curve_beyond_t4(paper_gyro):
+    y = paper_gyro.rate(2**14, TAU0, np.random.default_rng(4))
+    short = allan_curves(y, TAU0)[0]
+    long = allan_curves(y, TAU0, tau_factors(y.size, min_terms=2))[0]
+    assert ieee952.long_tau_start(short) == np.inf
+    start = ieee952.long_tau_start(long)
+    assert start == pytest.approx(long.tau_s[-1] / 4)
+    idx = ieee952.fit_index(long.tau_s, 0, start)
+    tail = np.flatnonzero(long.tau_s >= start)
+    assert set(tail) <= set(idx) and tail.size >= 5  # every τ of the last two octaves
+    octave = ieee952.octave_index(long.tau_s)
+    assert np.array_equal(idx[idx < tail[0]], octave[octave < tail[0]])
+    assert np.array_equal(ieee952.fit_index(short.tau_s), ieee952.octave_index(short.tau_s))
+
+
+@pytest.mark.parametrize("seed", [501, 506])
+def test_a_ramp_of_size_three_is_resolved_up_to_t2_not_at_t4(seed, paper_gyro):
+    y, slope = ramped(seed, paper_gyro)
+    at_t4 = ieee952.fit_noise_terms(allan_curves(y, TAU0)[0], "gyro").rate_ramp
+    curve = allan_curves(y, TAU0, tau_factors(N, min_terms=FIT_MIN_TERMS))[0]
+    at_t2 = ieee952.fit_noise_terms(curve, "gyro").rate_ramp
+    assert at_t4.value is None and at_t4.hi > slope
+    assert at_t2.value is not None and at_t2.lo < slope < at_t2.hi
+    assert at_t2.hi < at_t4.hi  # the points from T/4 to T/2 bound R more tightly
+
+
+def test_a_clean_record_gets_no_ramp_from_the_long_taus(paper_gyro):
+    y = paper_gyro.rate(N, TAU0, np.random.default_rng(500))
+    curve = allan_curves(y, TAU0, tau_factors(N, min_terms=FIT_MIN_TERMS))[0]
+    assert ieee952.fit_noise_terms(curve, "gyro").rate_ramp.value is None
