@@ -27,6 +27,9 @@ Every fit uses the policy of :func:`ieee952.fit_noise_terms` (weights from
 :func:`ieee952.monotone_edf`, τ ≥ the baseline's :func:`ieee952.fit_start`, signed prefilter
 1/τ² column), and the fitted τ range is fixed for the whole loop: every error before/after is a
 deviance over the same τ points, and the loop's terms before equal the reported IEEE 952 terms.
+One exception: a narrowband line whose AVAR hump lies among the short τ the fit start left out
+(:func:`_short_line_trial`) is judged on the wider range the fit start chooses with it, against
+the current model on that range; once accepted, that range holds for the rest of the loop.
 
 The loop's records are frozen dataclasses (:class:`Trial`, :class:`Decision`,
 :class:`AcceptedEffect`, :class:`RejectedCandidate`), serialised for report.json by
@@ -676,6 +679,11 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         if chosen is None:
             break
         rejected.pop(chosen.trial.kind, None)
+        if chosen.trial.fit_start is not None:  # a short-τ line: the range grows from here on
+            ax.tau_min, note = chosen.trial.fit_start
+            ax.fit_note = f"{note} (with the {chosen.trial.cand.params['frequency_hz']:.4g} Hz "
+            ax.fit_note += "narrowband line below the baseline's fit start modelled)"
+            good = goodness(state.fit(ax), tau, state.avar, edf)  # error before, same τ
         state = chosen.trial.state
         new_fit = state.fit(ax)
         new_good = goodness(new_fit, tau, state.avar, edf)
@@ -936,7 +944,75 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         trials.append(
             Trial(name, cand, float(dbic - DELTA_BIC), flags_ok, new_state, holdout, change)
         )
-    return [_decide(t) for t in trials]
+    short = _short_line_trial(ax, state)
+    return [_decide(t) for t in trials + ([short] if short is not None else [])]
+
+
+def _with_start(ax: _Axis, tau_min: float) -> _Axis:
+    """The axis context with the fitted range starting at ``tau_min`` (s) (a shallow copy: the
+    caches of full-rate work are shared)."""
+    other = copy.copy(ax)
+    other.tau_min = tau_min
+    return other
+
+
+def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
+    """A narrowband line below the fitted range: the model that :func:`ieee952.fit_start` cut
+    short may lack a line whose AVAR peak (0.371/f0) lies among the τ it left out (measured: a
+    ≈ 10 Hz vibration on the ADIS16405 accelerometers dropped τ 0.01–0.04 s and left a dip at
+    its AVAR null τ ≈ 1/f0 = 0.1 s inside the range).  Searched as every line
+    (:func:`_narrowband_refine`, both views), but fitted from the first τ; the fit start is then
+    chosen again with the line (:func:`ieee952.fit_start`) and the line is judged by the usual
+    rules (ΔBIC, hold-out, flags, the spectrum's excess) against the current model on that new
+    range, so both sides of every comparison cover the same τ.  ``None`` when the fit already
+    starts at the first τ, no line slot is left, or the line does not widen the range."""
+    tau, edf = ax.tau, ax.edf
+    name = _column_name("narrowband", state)
+    if name is None or ax.tau_min <= tau[0] * (1 + 1e-9):
+        return None
+    full = _with_start(ax, float(tau[0]))
+    specs = [s for s in _grids(full, state)["narrowband"] if 0.371 / s[0] < ax.tau_min]
+    if not specs:
+        return None
+    cutoff = state.fit(full).cutoff_hz
+    seeds = _column_fits(
+        tau, state.avar, edf, full.tau_min, state.columns, "narrowband", specs,
+        state.n_nonlinear, cutoff,
+    )  # fmt: skip
+    spec, fits, fit_line = _narrowband_refine(full, state, _best(seeds)[0], cutoff)
+    cand = _column_candidate("narrowband", spec, fit_line, state, full)
+    new_state = _State(
+        state.avar,
+        state.y_d,
+        state.spikes,
+        state.columns | {name: cand.column},
+        state.n_nonlinear + N_SHAPE["narrowband"],
+        state.column_params,
+        effect_parameters=state.effect_parameters | {name: ("narrowband", spec)},
+    )
+    tau_min, note = ieee952.fit_start(
+        tau,
+        state.avar,
+        edf,
+        new_state.columns,
+        flicker_max=ieee952.flicker_limit(ax.avar_hi(state.avar)),
+    )
+    if tau_min >= ax.tau_min * (1 - 1e-9):
+        return None
+    wide = _with_start(ax, tau_min)
+    fit_old = state.fit(wide)
+    good_old = goodness(fit_old, tau, state.avar, edf)
+    k = N_SHAPE["narrowband"] + 1
+    dbic, flags_ok = _judge("narrowband", new_state.fit(wide), fit_old, good_old, k, tau,
+                            state.avar, edf)  # fmt: skip
+    cand.evidence |= {"avar_delta_bic": dbic, "fit_start_s": [ax.tau_min, tau_min]}
+    if dbic >= DELTA_BIC:
+        cand.intervals |= _column_profile("narrowband", fits, state.avar, edf)
+        cand.evidence |= _spectrum_view(ax, state, cand)
+    holdout = partial(_holdout_column, wide, state, cand)
+    key = f"{name} below the fit start"  # its own record next to the in-range line's
+    return Trial(key, cand, float(dbic - DELTA_BIC), flags_ok, new_state, holdout,
+                 fit_start=(tau_min, note))  # fmt: skip
 
 
 def _corrected_state(ax: _Axis, state: _State, cand: effects.Candidate) -> _State:
@@ -969,6 +1045,10 @@ class Trial:
     holdout: Callable[[], dict]
     errors: ErrorChange | None = None
     """Both errors before and after the candidate (None: not measured; no rule applies)."""
+    fit_start: tuple[float, str] | None = None
+    """(τ_min s, note) of the wider fitted range a short-τ line was judged on
+    (:func:`_short_line_trial`, whose errors are not measured: an AVAR-only line is judged
+    by ΔBIC, hold-out, flags and the spectrum); ``None``: the loop's current range."""
 
 
 @dataclass(frozen=True)
