@@ -25,14 +25,14 @@ import numpy as np
 
 from imupipe.jit import disk_cached
 from imupipe.model import effects, ieee952
-from imupipe.stats import edf
 from imupipe.stats.allan import AllanCurve
 
 FIT_KERNELS = (ieee952._fit_designs, ieee952._fit_gamma, ieee952._nnls, ieee952._passive_lstsq)
 """The IEEE 952 fit's kernels (~7 s of CPU to compile, the longest chain)."""
-LOOP_KERNELS = (effects._innovations, effects._hann_windowed, edf._mvar_over_avar)
-"""Kernels first called by the closed loop: its whitener, its periodogram, and the R(n) noise
-identification of its short Allan curves."""
+LOOP_KERNELS = (effects._innovations, effects._hann_windowed)
+"""Kernels first called by the closed loop: its whitener and its periodogram.  (The R(n) noise
+identification, ``edf._mvar_over_avar``, is not one: the fit's Allan curve reaches T/2, whose
+last factors the first Allan curve already identifies with it.)"""
 WAIT_S = 300.0
 """Longest wait for the child before compiling in this process instead."""
 
@@ -50,7 +50,6 @@ def compile_late_kernels(loop: bool) -> None:
         white = np.random.default_rng(0).standard_normal(4096)
         effects.Whitener(effects.NoisePsd(1.0, 0.0, np.inf, 0.0), white.size, 0.01)
         effects.psd_line(white, 0.01, 10.0, 20.0)
-        edf.b1_noise_id(white, 100)  # white phase: the R(n) branch
 
 
 class Ahead:

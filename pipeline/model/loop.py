@@ -977,10 +977,12 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
     cutoff = state.fit(full).cutoff_hz
     seeds = _column_fits(
         tau, state.avar, edf, full.tau_min, state.columns, "narrowband", specs,
-        state.n_nonlinear, cutoff,
+        state.n_nonlinear, cutoff, ax.dense_from,
     )  # fmt: skip
-    spec, fits, fit_line = _narrowband_refine(full, state, _best(seeds)[0], cutoff)
+    spec, fits, fit_line, centre = _narrowband_refine(full, state, _best(seeds)[0], cutoff)
     cand = _column_candidate("narrowband", spec, fit_line, state, full)
+    cand.evidence["spectrum_centre"] = centre  # the centre is the spectrum's, as in the range
+    cand.intervals["frequency_hz"] = [centre["frequency_lo"], centre["frequency_hi"]]
     new_state = _State(
         state.avar,
         state.y_d,
@@ -988,7 +990,7 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
         state.columns | {name: cand.column},
         state.n_nonlinear + N_SHAPE["narrowband"],
         state.column_params,
-        effect_parameters=state.effect_parameters | {name: ("narrowband", spec)},
+        effect_parameters=state.effect_parameters | {name: ("narrowband", cand.evidence["shape"])},
     )
     tau_min, note = ieee952.fit_start(
         tau,
@@ -996,6 +998,7 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
         edf,
         new_state.columns,
         flicker_max=ieee952.flicker_limit(ax.avar_hi(state.avar)),
+        dense_from=ax.dense_from,
     )
     if tau_min >= ax.tau_min * (1 - 1e-9):
         return None
