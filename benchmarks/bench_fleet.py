@@ -6,7 +6,8 @@
 Records ``--units`` simulated recordings at 100 Hz (seeds 0..units-1, kept in ``--dir`` for the
 next run), warms the numba cache with one analysis, then times, one after the other: the
 sequential loop in this process (numba's and polars' default thread pools), the same loop in a
-child process pinned to one thread as a fleet worker is (``SINGLE_THREAD_ENV``), ``run_fleet``
+child process pinned to one core as a fleet worker is (``SINGLE_THREAD_ENV``, one axis at a
+time), ``run_fleet``
 on a LocalCluster of 1 worker, and of 2 workers (each including cluster start and stop and the
 fleet report).  The fleet's overhead is measured against the one-thread loop: the same work on
 the same single core, without Dask and the fleet report.  All runs use imupipe analyze's
@@ -37,10 +38,10 @@ ONE_THREAD_LOOP = """
 import sys, time
 from imupipe.api import analyze
 out, paths = sys.argv[1], sys.argv[2:]
-analyze(paths[0], out + "/warm")  # imports and the numba cache, not timed
+analyze(paths[0], out + "/warm", workers=1)  # imports and the numba cache, not timed
 t0 = time.perf_counter()
 for k, path in enumerate(paths):
-    analyze(path, f"{out}/{k}")
+    analyze(path, f"{out}/{k}", workers=1)  # one axis at a time, as in a fleet worker
 print(time.perf_counter() - t0)
 """
 

@@ -17,6 +17,16 @@ from imupipe.errors import FleetError
 CONNECT_TIMEOUT_S = 10.0
 """How long to try reaching an existing scheduler before giving up (s)."""
 
+WORKER_CONFIG = {
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+    "distributed.worker.profile.enabled": False,
+}
+"""Dask settings of the embedded cluster's workers: glibc's own malloc trim threshold (Dask sets
+64 KiB, so each analysis' large temporaries are returned to the OS and faulted in again) and no
+statistical profiler sampling the task's stack every 10 ms.  Measured on 1 h / 100 Hz units,
+one worker: 5.0 s per unit with Dask's defaults, 3.6 s with these.  A user's own cluster keeps
+its deployment's settings (docs/fleets.md says which to set)."""
+
 SINGLE_THREAD_ENV = {"NUMBA_NUM_THREADS": "1", "POLARS_MAX_THREADS": "1"}
 """Set in every embedded worker process (Dask's nanny already sets OMP/MKL/OpenBLAS to one
 thread): the Allan and EDF kernels are numba ``prange`` loops and polars has its own pool, so an
@@ -78,17 +88,18 @@ def _started(n: int) -> Iterator[LocalCluster]:
         FleetError: it did not start (Dask's start-up timeouts on an overloaded machine).
     """
     try:
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address="127.0.0.1:0",
-            # a worker's heartbeat racing the scheduler's shutdown logs an ERROR with a
-            # traceback on the user's terminal; every unit's failure is in the fleet report
-            silence_logs=logging.CRITICAL,
-            env=SINGLE_THREAD_ENV,
-        )
+        with dask.config.set(WORKER_CONFIG):  # read by the nannies as they spawn the workers
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address="127.0.0.1:0",
+                # a worker's heartbeat racing the scheduler's shutdown logs an ERROR with a
+                # traceback on the user's terminal; every unit's failure is in the fleet report
+                silence_logs=logging.CRITICAL,
+                env=SINGLE_THREAD_ENV,
+            )
     except (TimeoutError, OSError) as exc:
         raise FleetError(
             f"the local Dask cluster of {n} worker(s) did not start: {exc or type(exc).__name__} "
