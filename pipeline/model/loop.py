@@ -235,6 +235,21 @@ class _State:
     # (kind, shape parameters of ieee952.effect_shape) of each column
     effect_parameters: dict[str, tuple[str, tuple]] = field(default_factory=dict)
 
+    def with_column(self, name: str, cand: effects.Candidate, spec: tuple) -> _State:
+        """This state with the AVAR-column candidate ``cand`` (shape parameters ``spec``) added
+        as column ``name``: its non-linear parameters counted, a Gauss–Markov Tc kept for the
+        time-domain model, its shape recorded."""
+        kind = cand.kind
+        return _State(
+            self.avar,
+            self.y_d,
+            self.spikes,
+            self.columns | {name: cand.column},
+            self.n_nonlinear + N_SHAPE[kind],
+            self.column_params | ({name: spec[0]} if kind == "gauss_markov" else {}),
+            effect_parameters=self.effect_parameters | {name: (kind, cand.evidence["shape"])},
+        )
+
     def fit(self, ax: _Axis, possible_b: bool = False) -> ieee952.CompositeFit:
         """The composite fit of this state; ``possible_b``: with B held to a plateau under
         the curve (:func:`ieee952.flicker_limit`) — the reported model.  The loop's decisions
@@ -922,15 +937,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         if centre is not None:  # a narrowband line: its centre is the spectrum's
             cand.evidence["spectrum_centre"] = centre
             cand.intervals["frequency_hz"] = [centre["frequency_lo"], centre["frequency_hi"]]
-        new_state = _State(
-            state.avar,
-            state.y_d,
-            state.spikes,
-            state.columns | {name: cand.column},
-            state.n_nonlinear + N_SHAPE[kind],
-            state.column_params | ({name: spec[0]} if kind == "gauss_markov" else {}),
-            effect_parameters=state.effect_parameters | {name: (kind, cand.evidence["shape"])},
-        )
+        new_state = state.with_column(name, cand, spec)
         fit_named = new_state.fit(ax)
         k = N_SHAPE[kind] + 1
         dbic, flags_ok = _judge(kind, fit_named, fit, good, k, tau, state.avar, edf)
@@ -983,15 +990,7 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
     cand = _column_candidate("narrowband", spec, fit_line, state, full)
     cand.evidence["spectrum_centre"] = centre  # the centre is the spectrum's, as in the range
     cand.intervals["frequency_hz"] = [centre["frequency_lo"], centre["frequency_hi"]]
-    new_state = _State(
-        state.avar,
-        state.y_d,
-        state.spikes,
-        state.columns | {name: cand.column},
-        state.n_nonlinear + N_SHAPE["narrowband"],
-        state.column_params,
-        effect_parameters=state.effect_parameters | {name: ("narrowband", cand.evidence["shape"])},
-    )
+    new_state = state.with_column(name, cand, spec)
     tau_min, note = ieee952.fit_start(
         tau,
         state.avar,
