@@ -247,26 +247,3 @@ def test_a_local_cluster_that_does_not_start_is_one_line(tmp_path, monkeypatch, 
         "start in 60 seconds (is the machine overloaded? --workers fewer, or --scheduler an "
         "existing cluster)\n"
     )
-
-
-def test_embedded_workers_keep_glibc_malloc_trimming_and_run_no_profiler():
-    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 and its workers sample every task's stack
-    every 10 ms: 5.0 s instead of 3.6 s per 1 h unit.  The embedded cluster's workers have
-    neither, and each is pinned to one thread."""
-    import os
-
-    import dask.config
-
-    from imupipe.fleet.cluster import fleet_client
-
-    def probe():
-        return (
-            os.environ.get("MALLOC_TRIM_THRESHOLD_"),
-            dask.config.get("distributed.worker.profile.enabled"),
-            os.environ.get("NUMBA_NUM_THREADS"),
-        )
-
-    with fleet_client(None, 1) as client:
-        (seen,) = client.run(probe).values()
-    assert seen == (None, False, "1")
-    assert dask.config.get("distributed.worker.profile.enabled")  # the client's is untouched
