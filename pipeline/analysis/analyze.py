@@ -42,6 +42,7 @@ from imupipe.model.ahead import compile_ahead
 from imupipe.model.effects import psd_line, spike_candidate
 from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
+from imupipe.pages import small_pages
 from imupipe.progress import StageProgress
 from imupipe.stats import robust
 from imupipe.stats.allan import FIT_MIN_TERMS, AllanCurve, allan_curves, tau_factors
@@ -339,6 +340,7 @@ def analyze(
     :mod:`imupipe.model.ahead`).
     """
     with (
+        small_pages(),
         compile_ahead(options.loop, options.compile_ahead) as ahead,
         open_columns(
             Path(path),

@@ -1,0 +1,53 @@
+"""imupipe.pages: an analysis allocates its large arrays without numpy's huge-page advice, and
+leaves numpy's setting as it found it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import imupipe.analysis.analyze as orchestrator
+from imupipe.pages import _toggle, small_pages
+
+
+def huge_pages_on() -> bool:
+    """numpy's current huge-page setting, read without changing it."""
+    toggle = _toggle()
+    assert toggle is not None  # numpy >= 1.26 has it (pyproject's floor)
+    before = toggle(True)
+    toggle(before)
+    return before
+
+
+@pytest.mark.parametrize("initial", [True, False])
+def test_small_pages_switches_off_and_restores(initial: bool) -> None:
+    toggle = _toggle()
+    saved = toggle(initial)
+    try:
+        with small_pages():
+            assert huge_pages_on() is False
+        assert huge_pages_on() is initial
+        with pytest.raises(RuntimeError), small_pages():
+            raise RuntimeError  # restored on the way out of an error too
+        assert huge_pages_on() is initial
+    finally:
+        toggle(saved)
+
+
+def test_analysis_runs_on_small_pages(
+    tmp_path: Path, small_recordings, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    seen: list[bool] = []
+    condition = orchestrator.condition
+
+    def spy(*args, **kwargs):
+        seen.append(huge_pages_on())
+        return condition(*args, **kwargs)
+
+    monkeypatch.setattr(orchestrator, "condition", spy)
+    rec = small_recordings.make("adis", tmp_path / "adis.mcap")
+    before = huge_pages_on()
+    small_recordings.run(rec, tmp_path / "out", 1 << 40)
+    assert seen == [False]
+    assert huge_pages_on() is before
