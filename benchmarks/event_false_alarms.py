@@ -34,6 +34,7 @@ import numpy as np
 from scipy import stats
 
 from imupipe.analysis import events as ev
+from imupipe.model.effects import spike_candidate
 from imupipe.recording.scenario import Scenario, Temperature
 from imupipe.vocab import AXES
 
@@ -85,7 +86,10 @@ def clean_recording(source: str, seed: int, hours: float, rho: float) -> np.ndar
 
 def alarms(y: np.ndarray) -> dict[str, object]:
     """Events found at each α, with the measured correlations and as if independent."""
-    means = {a: ev.fine_means(y[:, j], 1 / RATE_HZ) for j, a in enumerate(AXES)}
+    means = {
+        a: ev.fine_means(y[:, j], 1 / RATE_HZ, spike_candidate(y[:, j], 1 / RATE_HZ))
+        for j, a in enumerate(AXES)
+    }
     b = ev.fine_block(1 / RATE_HZ)
     out: dict[str, object] = {}
     for alpha in ALPHAS:

@@ -25,6 +25,7 @@ from real_final_model import recordings
 
 from imupipe.analysis.analyze import axis_result
 from imupipe.analysis.events import detect, event_mask, fill_excised, fine_means
+from imupipe.model.effects import spike_candidate
 from imupipe.stats.allan import allan_curves, tau_factors
 from imupipe.vocab import sensor_of
 
@@ -49,7 +50,7 @@ def main() -> None:
     for rec, (series, tau0) in recordings(ref).items():
         n = len(next(iter(series.values())))
         units = {a: "rad/s" if sensor_of(a) == "gyro" else "m/s^2" for a in series}
-        means = {a: fine_means(y, tau0) for a, y in series.items()}
+        means = {a: fine_means(y, tau0, spike_candidate(y, tau0)) for a, y in series.items()}
         found = detect(means, tau0, n, units, 0.0)
         tests = sum(found.detector.windows)
         print(f"## {rec}: {len(found.events)} event(s), {tests} windows tested")

@@ -39,7 +39,7 @@ from imupipe.errors import ImupipeError, TooFewFramesError
 from imupipe.io.columns import HOUSEKEEPING, ColumnSource, open_columns
 from imupipe.io.decode import ImuRecording
 from imupipe.model.ahead import compile_ahead
-from imupipe.model.effects import psd_line, spike_candidate
+from imupipe.model.effects import Candidate, psd_line, spike_candidate
 from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
 from imupipe.pages import small_pages
@@ -138,16 +138,19 @@ def axis_result(
     supply_d: np.ndarray | None,
     loop: bool,
     excluded: np.ndarray | None = None,
+    searched: OutlierSearch | None = None,
 ) -> AxisResult:
     """Stage 4 (+ loop) of one axis: outliers excised (:func:`excise_outliers`), mean, rms, the
     closed loop and the final model (the loop's, or the IEEE 952 fit without the loop), both
     fitted on ``curve`` (up to T/2, :data:`FIT_MIN_TERMS`) and published up to T/4
     (``temp_d``, ``supply_d``: the segment's temperature and supply as
     :func:`imupipe.model.loop.aux_block_means`; ``excluded``: the samples masked by the
-    ``"mask"`` gap policy, left out of mean and rms too)."""
+    ``"mask"`` gap policy, left out of mean and rms too; ``searched``: the outlier search
+    already made on this very ``y``, else it is made here)."""
     sensor = sensor_of(name)
     usable = None if excluded is None else ~excluded
-    y, curve, outliers = excise_outliers(y, tau0_s, curve, excluded)
+    found = spike_candidate(y, tau0_s) if searched is None else searched.found
+    y, curve, outliers = excise_outliers(y, tau0_s, curve, excluded, found)
     signals = AxisSignals(
         name, sensor, y, tau0_s, temp_d, supply_d, excluded, spike_free=outliers is None
     )
@@ -166,15 +169,26 @@ def axis_result(
     )
 
 
+@dataclass(frozen=True)
+class OutlierSearch:
+    """:func:`imupipe.model.effects.spike_candidate` of an axis' series, made once by the event
+    pass and handed to :func:`axis_result` when the series it analyses is the same."""
+
+    found: Candidate | None  # None: no outlier
+
+
 def excise_outliers(
-    y: np.ndarray, tau0_s: float, curve: AllanCurve, excluded: np.ndarray | None
+    y: np.ndarray,
+    tau0_s: float,
+    curve: AllanCurve,
+    excluded: np.ndarray | None,
+    found: Candidate | None,
 ) -> tuple[np.ndarray, AllanCurve, dict | None]:
-    """Outliers (:func:`imupipe.model.effects.spike_candidate`: beyond a family-wise, LSB- and
-    tail-aware limit from the local median) replaced by their local median before the noise
-    fit and the loop, and the Allan curve recomputed without them.  Returns the series (a
-    corrected copy when any was found), its curve and what was excised (SI units), or the
-    inputs and None."""
-    found = spike_candidate(y, tau0_s)
+    """Outliers ``found`` in ``y`` (:func:`imupipe.model.effects.spike_candidate`: beyond a
+    family-wise, LSB- and tail-aware limit from the local median) replaced by their local
+    median before the noise fit and the loop, and the Allan curve recomputed without them.
+    Returns the series (a corrected copy when any was found), its curve and what was excised
+    (SI units), or the inputs and None."""
     if found is None:
         return y, curve, None
     fix = found.spikes
@@ -233,27 +247,33 @@ def input_summary(
 
 def find_axis_events(
     axis: AxisReader, series: ConditionedSeries, t0_stamp_s: float, run: AxisMap
-) -> tuple[EventsFound | None, dict[str, str]]:
+) -> tuple[EventsFound | None, dict[str, str], dict[str, OutlierSearch]]:
     """First pass over the axes (``run``: :func:`imupipe.analysis.workers.axis_pool`'s map):
     the disturbance events found jointly on every analysable axis
-    (:mod:`imupipe.analysis.events`; None with fewer than one such axis), and the axes found
-    stuck."""
+    (:mod:`imupipe.analysis.events`; None with fewer than one such axis), the axes found
+    stuck, and each analysable axis' outlier search (the detector's input leaves them out)."""
 
-    def first_pass(name: str) -> np.ndarray | str:
+    def first_pass(name: str) -> tuple[np.ndarray, OutlierSearch] | str:
         y = axis(name)
-        return unanalysable(y) or fine_means(series.on_grid(y), series.tau0_s)
+        if why := unanalysable(y):
+            return why
+        y = series.on_grid(y)
+        searched = OutlierSearch(spike_candidate(y, series.tau0_s))
+        return fine_means(y, series.tau0_s, searched.found), searched
 
     means: dict[str, np.ndarray] = {}
     stuck: dict[str, str] = {}
+    searched: dict[str, OutlierSearch] = {}
     for name, out in zip(AXES, run(first_pass, AXES), strict=True):
         if isinstance(out, str):
             stuck[name] = out
         else:
-            means[name] = out
+            means[name], searched[name] = out
     if not means:
-        return None, stuck
+        return None, stuck, searched
     units = {a: "rad/s" if sensor_of(a) == "gyro" else "m/s^2" for a in means}
-    return detect(means, series.tau0_s, series.samples, units, t0_stamp_s), stuck
+    found = detect(means, series.tau0_s, series.samples, units, t0_stamp_s)
+    return found, stuck, searched
 
 
 def analyze_axes(
@@ -288,8 +308,8 @@ def analyze_axes(
         return y
 
     with axis_pool(at_once) as run:
-        found, stuck = (
-            find_axis_events(axis, series, t0_stamp_s, run) if options.events else (None, {})
+        found, stuck, searched = (
+            find_axis_events(axis, series, t0_stamp_s, run) if options.events else (None, {}, {})
         )
         excluded = series.excluded
         cut = None if found is None else event_mask(list(found.events), series.samples)
@@ -302,13 +322,13 @@ def analyze_axes(
             if why is not None:
                 return why
             y = series.on_grid(y)
-            if found is not None:
-                y = fill_excised(y, found)
-            curve = allan_curves([y], tau0, m, excluded=excluded)[0]
+            filled = y if found is None else fill_excised(y, found)
+            curve = allan_curves([filled], tau0, m, excluded=excluded)[0]
             kernels_ready()
             return axis_result(
-                name, y, curve, tau0, aux["temp_c"], aux["supply_v"], options.loop, excluded
-            )
+                name, filled, curve, tau0, aux["temp_c"], aux["supply_v"], options.loop,
+                excluded, searched.get(name) if filled is y else None,
+            )  # fmt: skip
 
         results: dict[str, AxisResult] = {}
         with progress.stage("analyse", len(AXES), "axes") as advance:

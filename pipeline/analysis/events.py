@@ -48,7 +48,7 @@ from typing import Literal
 import numpy as np
 from scipy import ndimage, optimize, special
 
-from imupipe.model.effects import spike_candidate
+from imupipe.model.effects import Candidate
 from imupipe.stats import robust
 
 FINE_BLOCK_S = 0.5
@@ -175,16 +175,16 @@ def fine_block(tau0: float) -> int:
     return max(1, round(FINE_BLOCK_S / tau0))
 
 
-def fine_means(y: np.ndarray, tau0: float) -> np.ndarray:
+def fine_means(y: np.ndarray, tau0: float, outliers: Candidate | None) -> np.ndarray:
     """Means of consecutive :func:`fine_block` blocks of ``y`` (an incomplete last one dropped),
-    with the outliers of :func:`imupipe.model.effects.spike_candidate` removed first (a single
-    gross outlier is no event): the detector's input, one axis at a time."""
+    with ``outliers`` (:func:`imupipe.model.effects.spike_candidate` of ``y``, None: none
+    found) removed first (a single gross outlier is no event): the detector's input, one axis
+    at a time."""
     b = fine_block(tau0)
     n = len(y) // b
     means = np.asarray(y[: n * b], dtype=float).reshape(n, b).mean(axis=1)
-    found = spike_candidate(y, tau0)
-    if found is not None:
-        fix = found.spikes
+    if outliers is not None:
+        fix = outliers.spikes
         keep = fix.index < n * b
         np.subtract.at(means, fix.index[keep] // b, fix.value[keep] / b)
     return means

@@ -107,3 +107,48 @@ def test_quantum_and_abs_quantile():
     x = np.random.default_rng(4).standard_normal(10_001)
     for p in (0.5, 0.9, 0.999):
         assert robust.abs_quantile(x, p) == np.quantile(np.abs(x), p, method="higher")
+
+
+def counted_searches(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Patches the orchestrator's outlier search to record the length of each series searched."""
+    from imupipe.analysis import analyze as orchestrator
+
+    seen: list[int] = []
+    search = orchestrator.spike_candidate
+
+    def spy(y, tau0):
+        seen.append(len(y))
+        return search(y, tau0)
+
+    monkeypatch.setattr(orchestrator, "spike_candidate", spy)
+    return seen
+
+
+def test_outliers_are_searched_once_per_axis(
+    tmp_path: Path, small_recordings, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def outliers(block) -> None:  # ND + gyro_y at +4000 LSB (200 deg/s) in two frames
+        block.burst[[3000, 7000], 2] = 0x8000 | 4000
+
+    path = small_recordings.recording(
+        tmp_path / "in.mcap", 100.0, small_recordings.frames, 3, outliers
+    )
+    plain, _ = small_recordings.run(path, tmp_path / "plain", 1 << 40, events=False)
+    seen = counted_searches(monkeypatch)
+    report, _ = small_recordings.run(path, tmp_path / "out", 1 << 40)
+    assert len(seen) == 6  # once per axis, in the event pass
+    assert report["events"]["found"] == []  # so the event pass' search is reused
+    assert report["axes"]["gyro_y"]["outliers"]["count"] == 2
+    assert report["axes"] == plain["axes"]  # as if searched by the axis' own analysis
+
+
+def test_a_series_changed_by_excised_events_is_searched_again(
+    tmp_path: Path, small_recordings, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from imupipe.analysis import analyze as orchestrator
+
+    path = small_recordings.make("ros", tmp_path / "in.mcap")
+    monkeypatch.setattr(orchestrator, "fill_excised", lambda y, found: y + 0.0)  # a new series
+    seen = counted_searches(monkeypatch)
+    small_recordings.run(path, tmp_path / "out", 1 << 40)
+    assert len(seen) == 10  # the five analysed axes: in the event pass, then the filled series
