@@ -446,6 +446,7 @@ def compile_kernels(loop: bool = True) -> None:
     )
     robust.median_positive(np.cumsum(white), differences=True)
     robust.mad(np.cumsum(white), differences=True)
+    robust.running_median(white.reshape(-1, 2), 16)  # the event detector's local level
 
 
 def load_kernels(loop: bool) -> None:

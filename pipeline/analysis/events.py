@@ -46,7 +46,7 @@ from math import comb
 from typing import Literal
 
 import numpy as np
-from scipy import ndimage, optimize, special
+from scipy import optimize, special
 
 from imupipe.model.effects import Candidate
 from imupipe.stats import robust
@@ -312,7 +312,7 @@ def _scales(x: np.ndarray, dt: float) -> list[_Scale]:
         if len(starts) - 2 * NEIGHBOURS < MIN_WINDOWS:
             break
         m = (c[starts + length] - c[starts]) / length
-        r = m - ndimage.median_filter(m, size=(2 * NEIGHBOURS + 1, 1), mode="nearest")
+        r = m - robust.running_median(m, NEIGHBOURS)
         inner = slice(NEIGHBOURS, len(starts) - NEIGHBOURS)
         r = r[inner]
         scale = np.array([_robust_scale(r[:, a]) for a in range(r.shape[1])])

@@ -175,3 +175,47 @@ def abs_quantile(x: np.ndarray, p: float) -> float:
         return float("nan")
     k = int(np.ceil(p * (count - 1)))
     return float(_order_statistics(x, k, lo, hi, 0.0, True, False)[0])
+
+
+@numba.njit(cache=True, nogil=True)
+def _running_median(x: np.ndarray, half: int) -> np.ndarray:  # pragma: no cover (JIT)
+    """Columns of :func:`running_median`: a sorted window of 2·half + 1 values, slid by one
+    binary-search deletion and one insertion per row."""
+    rows, cols = x.shape
+    width = 2 * half + 1
+    out = np.empty((rows, cols))
+    window = np.empty(width)
+    for c in range(cols):
+        for j in range(width):  # rows −half … half, clamped to the edges
+            window[j] = x[min(max(j - half, 0), rows - 1), c]
+        window.sort()
+        out[0, c] = window[half]
+        for i in range(1, rows):
+            old = x[max(i - 1 - half, 0), c]
+            new = x[min(i + half, rows - 1), c]
+            k = np.searchsorted(window, old)  # an entry equal to old
+            if new >= old:  # shift the entries between up to new's place down by one
+                while k + 1 < width and window[k + 1] < new:
+                    window[k] = window[k + 1]
+                    k += 1
+            else:  # shift those between new's place and old up by one
+                while k > 0 and window[k - 1] > new:
+                    window[k] = window[k - 1]
+                    k -= 1
+            window[k] = new
+            out[i, c] = window[half]
+    return out
+
+
+def running_median(x: np.ndarray, half: int) -> np.ndarray:
+    """Median of rows i − ``half`` … i + ``half`` of each column of ``x`` (rows, cols), the
+    edge rows repeated beyond the ends: ``scipy.ndimage.median_filter(x, size=(2 half + 1, 1),
+    mode="nearest")`` bit for bit (an odd window's median is one of its values) for finite
+    ``x``, in O(rows · half) with small constants instead of a selection per row."""
+    x = kernel_input(x, np.float64)
+    if x.ndim != 2 or not np.isfinite(x).all():
+        raise ValueError("running_median: a finite 2-D array")
+    if x.shape[0] == 0:
+        return np.empty(x.shape)
+    return _running_median(x, half)
+

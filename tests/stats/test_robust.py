@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
-from imupipe.stats.robust import mad, median, median_positive
+from imupipe.stats.robust import mad, median, median_positive, running_median
 
 RNG = np.random.default_rng(5)
 CASES = {
@@ -63,3 +64,29 @@ def test_statistics_of_differences_equal_numpy(name):
         np.median(d[d > 0]) if (d > 0).any() else np.nan, rel=0, abs=0, nan_ok=True
     )
     assert mad(x, differences=True) == np.median(np.abs(d - np.median(d)))
+
+
+@pytest.mark.parametrize(
+    ("rows", "cols", "half"),
+    [(5000, 3, 16), (5000, 1, 0), (40, 2, 16), (1, 4, 3), (33, 2, 16), (34, 1, 16)],
+)
+@pytest.mark.parametrize("values", ["normal", "quantised"])
+def test_running_median_equals_scipys_median_filter(rows, cols, half, values):
+    x = RNG.standard_normal((rows, cols))
+    if values == "quantised":  # many ties, and runs of equal values
+        x = np.round(x * 2) / 2
+    expected = ndimage.median_filter(x, size=(2 * half + 1, 1), mode="nearest")
+    got = running_median(x, half)
+    assert got.shape == x.shape and np.array_equal(got, expected)
+
+
+def test_running_median_follows_a_level_step_and_ignores_a_spike():
+    x = np.concatenate([np.zeros(50), np.full(50, 4.0)])[:, None]
+    x[20] = 100.0
+    level = running_median(x, 3)[:, 0]
+    assert level[20] == 0.0 and level[46] == 0.0 and level[50] == 4.0 and level[53] == 4.0
+
+
+def test_running_median_refuses_non_finite_values():
+    with pytest.raises(ValueError, match="finite"):
+        running_median(np.array([[1.0], [np.nan], [2.0]]), 1)
