@@ -218,4 +218,3 @@ def running_median(x: np.ndarray, half: int) -> np.ndarray:
     if x.shape[0] == 0:
         return np.empty(x.shape)
     return _running_median(x, half)
-
