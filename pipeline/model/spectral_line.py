@@ -29,6 +29,10 @@ CENTRE_SPAN = 8.0  # an interval edge beyond the estimate ± this many widths is
 WIDTH_SPAN = 8.0  # the profile's width: within the estimate / … × this factor
 FINE_BAND = 15.0  # the profile's ordinates: within this many best widths of the best centre
 WHITTLE_EDF = 2.0  # a periodogram ordinate is S χ²₂ / 2
+COARSE_ORDINATES = 2048
+"""The coarse search reads a band of more ordinates than this as means of consecutive ones."""
+POOLS_PER_WIDTH = 32
+"""The fine fit pools consecutive ordinates spanning at most the coarse width / this."""
 
 
 def oscillator_psd(f: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
@@ -41,10 +45,48 @@ def oscillator_psd(f: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
     return 4 * a * w0_sq / ((w0_sq - w_sq) ** 2 + 4 * a * a * w_sq)
 
 
-def _deviance(freqs: np.ndarray, power: np.ndarray, floor: np.ndarray, f0: float, w: float):
-    """Whittle deviance of the ordinates against the floor columns plus the line at (f0, w)."""
-    design = np.column_stack([floor, oscillator_psd(freqs, f0, w)])
-    return ieee952.fit_nonneg_gamma(design, power, np.full(power.size, WHITTLE_EDF))[1]
+@dataclass(frozen=True)
+class _Pooled:
+    """Periodogram ordinates pooled ``size`` at a time (the last pool may be smaller): each
+    pool's mean ordinate is S̄ χ²₂ₖ / 2k for k members, S̄ their mean PSD — the Whittle
+    likelihood of pooled ordinates is the gamma deviance with ν = 2k (exact in the mean; the
+    gamma law holds where S is flat over a pool).  Pools of one ordinate are the ordinates
+    themselves, bit for bit."""
+
+    freqs: np.ndarray  # Hz, every member ordinate
+    start: np.ndarray  # first member of each pool (np.add.reduceat)
+    count: np.ndarray  # members of each pool
+    power: np.ndarray  # mean ordinate of each pool
+    floor: np.ndarray  # (pools, 2) mean floor columns (1, 1/f)
+    centre: np.ndarray  # Hz, mean frequency of each pool
+    line_mean: bool  # the line's PSD averaged over each pool's members, else read at its centre
+
+    @classmethod
+    def of(cls, freqs: np.ndarray, power: np.ndarray, size: int, line_mean: bool) -> _Pooled:
+        start = np.arange(0, power.size, max(1, size))
+        count = np.diff(np.append(start, power.size))
+        floor = np.column_stack([np.ones_like(freqs), 1.0 / freqs])
+        return cls(
+            freqs, start, count, cls._mean(start, count, power), cls._mean(start, count, floor),
+            cls._mean(start, count, freqs), line_mean,
+        )  # fmt: skip
+
+    @staticmethod
+    def _mean(start: np.ndarray, count: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Mean of ``x`` (each column of it) over each pool; ``x`` itself for pools of one."""
+        if count.size == x.shape[0]:
+            return x
+        sums = np.add.reduceat(x, start, axis=0)
+        return sums / (count if x.ndim == 1 else count[:, None])
+
+    def deviance(self, f0: float, w: float) -> float:
+        """Whittle deviance of the pools against the floor columns plus the line at (f0, w)."""
+        if self.line_mean:
+            line = self._mean(self.start, self.count, oscillator_psd(self.freqs, f0, w))
+        else:
+            line = oscillator_psd(self.centre, f0, w)
+        design = np.column_stack([self.floor, line])
+        return ieee952.fit_nonneg_gamma(design, self.power, WHITTLE_EDF * self.count)[1]
 
 
 @dataclass(frozen=True)
@@ -83,20 +125,22 @@ def line_centre(
     """
     if power.size < 8:
         return None
-    floor = np.column_stack([np.ones_like(freqs), 1.0 / freqs])
     coarse = [
         (c, w)
         for w in widths
         for c in seed_hz + w * np.linspace(-2, 2, 9)
         if freqs[0] < c < freqs[-1]
     ]
-    c1, w1 = min(coarse, key=lambda cw: _deviance(freqs, power, floor, *cw))
+    pooled = _Pooled.of(freqs, power, -(-power.size // COARSE_ORDINATES), line_mean=True)
+    c1, w1 = min(coarse, key=lambda cw: pooled.deviance(*cw))
     near = np.abs(freqs - c1) <= FINE_BAND * w1  # the line and its shoulders
     if near.sum() >= 8:
-        freqs, power, floor = freqs[near], power[near], floor[near]
+        freqs, power = freqs[near], power[near]
+    spacing = (freqs[-1] - freqs[0]) / (freqs.size - 1)
+    fine = _Pooled.of(freqs, power, int(w1 / (POOLS_PER_WIDTH * spacing)), line_mean=False)
 
     def joint(p: np.ndarray) -> float:  # (centre offset in units of w1, ln(width / w1))
-        return _deviance(freqs, power, floor, c1 + p[0] * w1, w1 * np.exp(p[1]))
+        return fine.deviance(c1 + p[0] * w1, w1 * np.exp(p[1]))
 
     start = optimize.minimize(joint, [0.0, 0.0], method="Nelder-Mead",
                               options={"xatol": 1e-3, "fatol": 1e-4})  # fmt: skip
@@ -104,15 +148,15 @@ def line_centre(
 
     def profile(c: float) -> float:  # min over the width of the deviance at centre c
         res = optimize.minimize_scalar(
-            lambda lw: _deviance(freqs, power, floor, c, w_hat * np.exp(lw)),
+            lambda lw: fine.deviance(c, w_hat * np.exp(lw)),
             bounds=(-np.log(WIDTH_SPAN), np.log(WIDTH_SPAN)),
             method="bounded",
             options={"xatol": 1e-3},
         )
-        return min(float(res.fun), _deviance(freqs, power, floor, c, w_hat))
+        return min(float(res.fun), fine.deviance(c, w_hat))
 
     d_min = min(profile(c_hat), float(start.fun))
-    dof = max(power.size - 5, 1)  # three linear coefficients, centre and width
+    dof = max(fine.power.size - 5, 1)  # three linear coefficients, centre and width
     phi = max(1.0, d_min / dof)
 
     def excess(c: float) -> float:  # > 0 outside the 95 % interval

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import integrate, signal
 
-from imupipe.model import effects, spectral_line
+from imupipe.model import effects, ieee952, spectral_line
 
 TAU0, N = 0.1, 2**16
 F0, WIDTH = 0.5, 0.01  # Hz: a line 65 bins wide
@@ -66,3 +66,60 @@ def test_the_centre_interval_covers_a_spread_line():
 def test_too_few_ordinates_give_no_centre():
     freqs = np.linspace(0.1, 0.2, 7)
     assert spectral_line.line_centre(freqs, np.ones(7), 0.15, np.array([0.01])) is None
+
+
+def long_band(seed: int, n: int = 20_000, width_bins: float = 200.0):
+    """Whittle ordinates of a band of ``n`` (unit floor plus a line ``width_bins`` ordinates wide
+    standing 20x above it at 20 Hz): (freqs, power, width Hz)."""
+    freqs = np.linspace(20.0 / 1.6, 20.0 * 1.6, n)
+    width = width_bins * (freqs[1] - freqs[0])
+    psd = spectral_line.oscillator_psd(freqs, 20.0, width)
+    power = (1.0 + 20.0 * psd / psd.max()) * np.random.default_rng(seed).exponential(size=n)
+    return freqs, power, width
+
+
+def test_pools_of_one_ordinate_are_the_ordinates_bit_for_bit():
+    freqs, power, width = long_band(0, n=300, width_bins=20.0)
+    line = spectral_line.oscillator_psd(freqs, 20.0, width)
+    design = np.column_stack([np.ones(300), 1 / freqs, line])
+    raw = ieee952.fit_nonneg_gamma(design, power, np.full(300, 2.0))[1]
+    for line_mean in (True, False):
+        pooled = spectral_line._Pooled.of(freqs, power, 1, line_mean)
+        assert pooled.deviance(20.0, width) == raw
+
+
+def test_a_pool_is_the_mean_of_its_ordinates_with_nu_2k():
+    freqs, power, width = long_band(1, n=1000, width_bins=20.0)
+    k = 7  # 142 pools of 7, the last of 6
+    pooled = spectral_line._Pooled.of(freqs, power, k, line_mean=True)
+    assert pooled.count.tolist() == [7] * 142 + [6]
+    psd = spectral_line.oscillator_psd(freqs, 20.0, width)
+    rows = [slice(i, i + k) for i in range(0, 1000, k)]
+    design = np.array([[1.0, (1 / freqs[r]).mean(), psd[r].mean()] for r in rows])
+    mean_power = np.array([power[r].mean() for r in rows])
+    expected = ieee952.fit_nonneg_gamma(design, mean_power, 2.0 * pooled.count)[1]
+    assert pooled.deviance(20.0, width) == pytest.approx(expected, rel=1e-12)
+    centred = spectral_line._Pooled.of(freqs, power, k, line_mean=False)  # PSD at pool centres
+    assert centred.centre[0] == pytest.approx(freqs[:7].mean(), rel=1e-15)
+
+
+def test_a_long_band_is_searched_on_pools_and_still_covers_the_centre(monkeypatch):
+    rows: list[int] = []
+    fit = ieee952.fit_nonneg_gamma
+
+    def spy(design, *args):
+        rows.append(len(design))
+        return fit(design, *args)
+
+    monkeypatch.setattr(ieee952, "fit_nonneg_gamma", spy)
+    covered = 0
+    for seed in range(4):
+        freqs, power, width = long_band(seed)
+        widths = np.geomspace(freqs[1] - freqs[0], 10.0, 14)
+        c = spectral_line.line_centre(freqs, power, freqs[np.argmax(power)], widths)
+        covered += c.lo < 20.0 < c.hi
+        assert abs(c.frequency_hz - 20.0) < 0.1 * width
+        assert c.width_hz == pytest.approx(width, rel=0.2)
+        assert c.ordinates > spectral_line.COARSE_ORDINATES  # the fine fit read them pooled
+    assert covered >= 3
+    assert max(rows) <= spectral_line.COARSE_ORDINATES  # never a fit of the 20,000 ordinates
