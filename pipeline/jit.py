@@ -14,8 +14,11 @@ it, string formatting compiled for ~1-2 s of CPU.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import numpy.typing as npt
+from numba.core.dispatcher import Dispatcher
 
 
 def kernel_input(x: npt.ArrayLike, dtype: npt.DTypeLike = None) -> np.ndarray:
@@ -41,3 +44,17 @@ def disk_cached(kernel: object) -> bool:
         return bool(load())
     except Exception:  # an unreadable index: numba recompiles; so would we
         return False
+
+
+def imported_kernels() -> list[Dispatcher]:
+    """The numba kernels defined in every imupipe module imported so far that numba compiles
+    on their own (not those inlined into their callers: ``inline="always"``)."""
+    return [
+        value
+        for name, module in list(sys.modules.items())
+        if name == "imupipe" or name.startswith("imupipe.")
+        for value in vars(module).values()
+        if isinstance(value, Dispatcher)
+        and value.__module__ == name
+        and value.targetoptions.get("inline") != "always"
+    ]

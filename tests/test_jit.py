@@ -54,3 +54,29 @@ def test_disk_cached_unreadable_index_is_cold() -> None:
 def test_disk_cached_without_a_disk_cache_claims_nothing_to_do(kernel: object) -> None:
     """No disk cache to fill (or another numba's layout): nothing is compiled ahead."""
     assert disk_cached(kernel)
+
+
+def test_imported_kernels_are_the_packages_own_compiled_kernels() -> None:
+    import imupipe.model.effects as effects
+    import imupipe.stats.robust as robust
+    from imupipe.jit import imported_kernels
+
+    kernels = imported_kernels()
+    assert robust._select in kernels and effects._hann_windowed in kernels
+    assert robust._value not in kernels  # inlined into its callers: never compiled alone
+    assert all(k.__module__.startswith("imupipe.") for k in kernels)
+    assert len(kernels) == len(set(map(id, kernels)))  # a re-exported kernel counted once
+
+
+@pytest.mark.parametrize("cached", [True, False])
+def test_the_spilled_paths_compile_child_runs_only_on_a_cold_cache(
+    cached: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from imupipe.analysis import analyze as orchestrator
+
+    children: list[list[str]] = []
+    monkeypatch.setattr(orchestrator, "disk_cached", lambda kernel: cached)
+    monkeypatch.setattr(orchestrator.subprocess, "run", lambda cmd, **kw: children.append(cmd))
+    monkeypatch.setattr(orchestrator, "compile_kernels", lambda loop: None)
+    orchestrator.load_kernels(True)
+    assert len(children) == (0 if cached else 1)
