@@ -83,12 +83,13 @@ def test_interrupt_in_a_worker_leaves_no_thread_process_or_spill(
     )
     # over the budget (spilled source), with room for two axes at once
     budget = 2 * orchestrator.AXIS_BYTES_PER_SAMPLE * small_recordings.frames
+    before = {p.pid for p in psutil.Process().children(recursive=True)}  # an earlier test's
     with pytest.raises(KeyboardInterrupt):
         imupipe.analyze(path, out=tmp_path / "out", workers=2, memory_budget_bytes=budget,
                         tmp_dir=spill, figures=False)  # fmt: skip
     assert seen == [2]
     assert not axis_threads()
-    assert psutil.Process().children(recursive=True) == []
+    assert {p.pid for p in psutil.Process().children(recursive=True)} <= before
     assert list(spill.iterdir()) == []
     assert not (tmp_path / "out" / "recording.rrd").exists()
 
