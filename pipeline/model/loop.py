@@ -124,6 +124,7 @@ class Goodness:
     tau_max_abs_z: float
     rms_z: float
     n_flags: int  # points with |z| > 3
+    tau_range: tuple[float, float]  # s: the fitted τ (error, max |z|, rms z and flags read these)
 
 
 @dataclass(frozen=True)
@@ -216,6 +217,8 @@ class LoopResult:
             "max_abs_z_after": self.after.max_abs_z,
             "tau_max_abs_z_before": self.before.tau_max_abs_z,
             "tau_max_abs_z_after": self.after.tau_max_abs_z,
+            "fit_tau_range_s_before": list(self.before.tau_range),
+            "fit_tau_range_s_after": list(self.after.tau_range),
             "time_domain_error_before": self.time_error_before,
             "time_domain_error_after": self.time_error_after,
         }
@@ -347,6 +350,7 @@ def goodness(
         tau_max_abs_z=float(tau[k]),
         rms_z=float(np.sqrt(np.mean(z[_fitted(fit, tau)] ** 2))),
         n_flags=int(np.sum(np.abs(z_in) > 3)),
+        tau_range=(float(fit.tau_range[0]), float(fit.tau_range[1])),
     )
 
 

@@ -119,6 +119,10 @@ def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
         model = jsonable(axis.loop.as_model_dict())
         kinds = ", ".join(e.kind for e in axis.loop.accepted) or "none"
         tau_max = _before_after(model, "tau_max_abs_z")
+        ranges = [
+            "–".join(_fmt(t) for t in model[f"fit_tau_range_s_{when}"])
+            for when in ("before", "after")
+        ]
         rows.append(
             (
                 axis.name,
@@ -126,6 +130,7 @@ def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
                 _before_after(model, "p_value"),
                 _before_after(model, "rms_z"),
                 f"{_before_after(model, 'max_abs_z')} (τ {tau_max} s)",
+                ranges[1] if ranges[0] == ranges[1] else " → ".join(ranges),
                 str(model.get("dof", "—")),
                 kinds,
             )
@@ -133,7 +138,9 @@ def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
     return rows
 
 
-_LOOP_HEADER = ("axis", "error", "p-value", "rms z", "max |z|", "dof", "effects")
+_LOOP_HEADER = ("axis", "error", "p-value", "rms z", "max |z|", "fitted τ [s]", "dof", "effects")
+"""The loop's statistics read the fitted τ, which reach T/2 (allan.parquet and the figures stop
+at T/4): the fitted range is shown beside them."""
 
 
 def _text_table(header: tuple[str, ...], rows: Iterable[tuple[str, ...]]) -> str:

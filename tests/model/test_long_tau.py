@@ -68,3 +68,19 @@ def test_a_clean_record_gets_no_ramp_from_the_long_taus(paper_gyro):
     y = paper_gyro.rate(N, TAU0, np.random.default_rng(500))
     curve = allan_curves(y, TAU0, tau_factors(N, min_terms=FIT_MIN_TERMS))[0]
     assert ieee952.fit_noise_terms(curve, "gyro").rate_ramp.value is None
+
+
+def test_the_loops_goodness_names_its_fitted_range_beyond_the_published_curve(paper_gyro):
+    from imupipe.model.loop import AxisSignals, close_loop
+
+    y, _ = ramped(506, paper_gyro)
+    curve = allan_curves(y, TAU0, tau_factors(N, min_terms=FIT_MIN_TERMS))[0]
+    result = close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), curve)
+    published = result.up_to(allan_curves(y, TAU0)[0].tau_s.size)
+    model = published.as_model_dict()
+    lo, hi = model["fit_tau_range_s_after"]
+    assert hi == curve.tau_s[-1] > N * TAU0 / 4 >= published.tau_s[-1]  # T/2, not T/4
+    assert lo in curve.tau_s.tolist() and lo < hi
+    for when in ("before", "after"):
+        first, last = model[f"fit_tau_range_s_{when}"]
+        assert first <= model[f"tau_max_abs_z_{when}"] <= last

@@ -283,7 +283,7 @@ def _fit(deviance: float, dof: int = 10) -> ieee952.CompositeFit:
 
 
 def _good(error: float = 10.0, max_abs_z: float = 0.0, n_flags: int = 0) -> Goodness:
-    return Goodness(error, 0.0, 10, 0.5, np.zeros(16), max_abs_z, 1.0, 0.0, n_flags)
+    return Goodness(error, 0.0, 10, 0.5, np.zeros(16), max_abs_z, 1.0, 0.0, n_flags, (0.1, 100.0))
 
 
 def _avar_with(z: dict[int, float]) -> np.ndarray:

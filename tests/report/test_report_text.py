@@ -72,8 +72,8 @@ def _curve() -> AllanCurve:
 
 def _loop(terms_after: ieee952.NoiseTerms) -> LoopResult:
     z = np.zeros_like(TAU)
-    before = Goodness(4.23456, 40.0, 40, 0.000123, z, 5.98765, 100.0, 3.14159, 4)
-    after = Goodness(1.034567, 30.0, 38, 0.41234, z, 2.21212, 0.1, 0.912345, 0)
+    before = Goodness(4.23456, 40.0, 40, 0.000123, z, 5.98765, 100.0, 3.14159, 4, (0.01, 200.0))
+    after = Goodness(1.034567, 30.0, 38, 0.41234, z, 2.21212, 0.1, 0.912345, 0, (0.001, 200.0))
     effect = AcceptedEffect(
         kind="temperature",
         params={"coefficient": 1.23456e-4, "lag_s": 12},
@@ -229,6 +229,7 @@ def test_loop_before_after_rounded_in_order(md: str) -> None:
         "0.000123 → 0.4123",  # p-value
         "3.142 → 0.9123",  # rms z
         "5.988 → 2.212 (τ 100 → 0.1 s)",  # max |z| at tau
+        "0.01–200 → 0.001–200",  # the fitted tau, before → after
         "38",  # dof after
         "temperature",
     ]
