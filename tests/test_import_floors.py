@@ -141,3 +141,17 @@ def test_tests_mirror_the_package_tree_and_share_fixtures_not_imports() -> None:
                 names = [a.name for a in node.names]
             bad = [n for n in names if n.split(".")[0].startswith(("test_", "conftest", "tests"))]
             assert not bad, f"{path.relative_to(TESTS)} imports {bad}"
+
+
+def test_the_command_line_does_not_import_what_an_analysis_rarely_needs() -> None:
+    """scipy.signal (~0.9 s with what it pulls in; only a prefilter's or a spread line's Welch
+    check needs it) and rerun-sdk (only when recording.rrd is written) are imported on use."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, imupipe.cli, imupipe.analysis.analyze; "
+        "print(sorted(m for m in ('scipy.signal', 'rerun') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 import scipy.fft
-from scipy import signal, special
+from scipy import special
 
 from imupipe.jit import kernel_input
 from imupipe.stats import robust
@@ -776,6 +776,8 @@ def psd_rolloff(y: np.ndarray, tau0: float) -> dict[str, float]:
     standard error ≈ √(1/(K b_mid) + 1/(K b_high)) (conservative for the overlap's correlation
     ignored only to first order); ``p_value``: one-sided normal P(no roll-off).
     """
+    from scipy import signal  # ~0.5 s to import; most analyses never need a Welch PSD
+
     n = min(len(y), PSD_MAX_SAMPLES)
     f, pxx = signal.welch(
         np.asarray(y[:n], dtype=float), fs=1.0 / tau0, nperseg=min(ROLLOFF_SEGMENT, n)
@@ -808,6 +810,8 @@ def band_excess(y: np.ndarray, tau0: float, f0: float, width_hz: float) -> dict[
     n = min(len(y), PSD_MAX_SAMPLES)
     seg = int(np.clip(2 ** np.round(np.log2(2.0 / (width_hz * tau0))), 64, max(64, n // 8)))
     seg = min(seg, n)
+    from scipy import signal  # imported when needed: see psd_rolloff
+
     f, pxx = signal.welch(np.asarray(y[:n], dtype=float), fs=1.0 / tau0, nperseg=seg)
     w = max(width_hz, 1.5 / (seg * tau0))
     dist = np.abs(f - f0)
