@@ -92,7 +92,8 @@ class _Pooled:
 @dataclass(frozen=True)
 class LineCentre:
     """A spread line's centre (Hz) with its 95 % Whittle profile interval, the width (Hz) at
-    the best centre, the dispersion φ and the number of ordinates fitted."""
+    the best centre, the dispersion φ and the number of periodogram ordinates the fine fit read
+    (pooled when they are many)."""
 
     frequency_hz: float
     lo: float
