@@ -53,6 +53,8 @@ TESTS: dict[str, tuple[str, ...]] = {
     "pipeline/vocab.py": ("tests/test_units.py", "tests/test_import_floors.py"),
     "pipeline/stats/allan.py": ("tests/stats/test_allan_mutants.py", "tests/stats/test_allan.py"),
     "pipeline/stats/edf.py": ("tests/stats/test_edf_mutants.py", "tests/stats/test_edf.py"),
+    "pipeline/pages.py": ("tests/test_pages.py",),
+    "pipeline/model/spectral_line.py": ("tests/model/test_spectral_line.py",),
     "pipeline/stats/robust.py": (
         "tests/stats/test_robust_mutants.py",
         "tests/stats/test_robust.py",
@@ -358,10 +360,6 @@ def main() -> None:
         help="resume the session directory printed by an earlier run of ONE module, re-testing "
         "its survivors (after adding tests)",
     )
-    parser.add_argument(
-        "--sample", type=int, help="run a random N of the selected mutants (skip the rest)"
-    )
-    parser.add_argument("--seed", type=int, default=0, help="seed of --sample's choice")
     parser.add_argument("--list", action="store_true", help="print the module -> tests map")
     args = parser.parse_args()
     if args.list or not args.modules:
