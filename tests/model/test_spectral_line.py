@@ -123,3 +123,34 @@ def test_a_long_band_is_searched_on_pools_and_still_covers_the_centre(monkeypatc
         assert c.ordinates > spectral_line.COARSE_ORDINATES  # the fine fit read them pooled
     assert covered >= 3
     assert max(rows) <= spectral_line.COARSE_ORDINATES  # never a fit of the 20,000 ordinates
+
+
+def test_the_interval_edges_are_where_the_profile_deviance_rises_by_chi2(monkeypatch):
+    """Each edge is where min over the width of the fine fit's deviance, less its minimum,
+    over φ, reaches χ²₁(0.95) = 3.84 — checked against a brute-force profile on a dense grid."""
+    made: list[spectral_line._Pooled] = []
+    of = spectral_line._Pooled.of
+
+    def keep(*args, **kwargs):
+        made.append(of(*args, **kwargs))
+        return made[-1]
+
+    monkeypatch.setattr(spectral_line._Pooled, "of", keep)
+    c, _ = centre(spread_line(3))
+    fine = made[-1]  # the pools the fine fit and the interval read
+    log_widths = np.linspace(
+        -np.log(spectral_line.WIDTH_SPAN), np.log(spectral_line.WIDTH_SPAN), 801
+    )
+
+    def profile(f0: float) -> float:
+        return min(fine.deviance(f0, c.width_hz * np.exp(lw)) for lw in log_widths)
+
+    d_min = min(profile(f0) for f0 in c.frequency_hz + c.width_hz * np.linspace(-0.05, 0.05, 11))
+    rise = [(profile(edge) - d_min) / c.dispersion for edge in (c.lo, c.hi)]
+    assert rise == pytest.approx([spectral_line.CHI2_95] * 2, abs=0.05)
+    inner = [
+        (profile(f0) - d_min) / c.dispersion
+        for f0 in (0.9 * c.lo + 0.1 * c.frequency_hz, 0.9 * c.hi + 0.1 * c.frequency_hz)
+    ]
+    assert max(inner) < spectral_line.CHI2_95 - 0.2  # inside the interval: below the limit
+    assert c.lo < c.frequency_hz < c.hi
