@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import threading
 from collections.abc import Callable, Iterator
 
 
@@ -35,15 +36,30 @@ def _toggle() -> Callable[[bool], bool] | None:
     return None
 
 
+_lock = threading.Lock()
+_active = 0  # analyses inside small_pages() (the setting is the process')
+_saved = True  # numpy's setting before the first of them
+
+
 @contextlib.contextmanager
 def small_pages() -> Iterator[None]:
-    """Within the block, numpy allocates its large arrays without asking for huge pages."""
+    """Within the block, numpy allocates its large arrays without asking for huge pages.
+
+    The setting is the process': analyses running at the same time (threads) share one switch,
+    set by the first to enter and restored by the last to leave."""
+    global _active, _saved
     toggle = _toggle()
     if toggle is None:
         yield
         return
-    before = toggle(False)
+    with _lock:
+        if _active == 0:
+            _saved = toggle(False)
+        _active += 1
     try:
         yield
     finally:
-        toggle(before)
+        with _lock:
+            _active -= 1
+            if _active == 0:
+                toggle(_saved)

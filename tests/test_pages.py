@@ -51,3 +51,18 @@ def test_analysis_runs_on_small_pages(
     small_recordings.run(rec, tmp_path / "out", 1 << 40)
     assert seen == [False]
     assert huge_pages_on() is before
+
+
+def test_overlapping_analyses_share_the_switch_and_the_last_restores_it() -> None:
+    toggle = _toggle()
+    saved = toggle(True)
+    try:
+        first, second = small_pages(), small_pages()
+        first.__enter__()
+        second.__enter__()
+        first.__exit__(None, None, None)  # the first leaves while the second still runs
+        assert huge_pages_on() is False
+        second.__exit__(None, None, None)
+        assert huge_pages_on() is True  # numpy's setting from before the first
+    finally:
+        toggle(saved)
