@@ -180,20 +180,32 @@ def abs_quantile(x: np.ndarray, p: float) -> float:
 @numba.njit(cache=True, nogil=True)
 def _running_median(x: np.ndarray, half: int) -> np.ndarray:  # pragma: no cover (JIT)
     """Columns of :func:`running_median`: a sorted window of 2·half + 1 values, slid by one
-    binary-search deletion and one insertion per row."""
+    binary-search deletion and one insertion per row.  The first window is built by insertion
+    too (numba's ``sort`` would add ~2 s of compiling to a first run)."""
     rows, cols = x.shape
     width = 2 * half + 1
     out = np.empty((rows, cols))
     window = np.empty(width)
     for c in range(cols):
-        for j in range(width):  # rows −half … half, clamped to the edges
-            window[j] = x[min(max(j - half, 0), rows - 1), c]
-        window.sort()
+        for j in range(width):  # rows −half … half, clamped to the edges, inserted in order
+            v = x[min(max(j - half, 0), rows - 1), c]
+            k = j
+            while k > 0 and window[k - 1] > v:
+                window[k] = window[k - 1]
+                k -= 1
+            window[k] = v
         out[0, c] = window[half]
         for i in range(1, rows):
             old = x[max(i - 1 - half, 0), c]
             new = x[min(i + half, rows - 1), c]
-            k = np.searchsorted(window, old)  # an entry equal to old
+            lo, hi = 0, width  # binary search for an entry equal to old (np.searchsorted's
+            while lo < hi:  # left end: its compiling would cost ~1 s on a first run)
+                mid = (lo + hi) // 2
+                if window[mid] < old:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            k = lo
             if new >= old:  # shift the entries between up to new's place down by one
                 while k + 1 < width and window[k + 1] < new:
                     window[k] = window[k + 1]
