@@ -28,6 +28,25 @@ def test_the_fit_grid_extends_the_published_one_to_half_the_record():
     assert np.array_equal(fitted[: published.size], published)
 
 
+def test_the_tail_noise_type_only_gets_redder(synth_rate):
+    """A clean accelerometer (the paper's accel_z N and B, 2.9 h at 100 Hz, seed 24): where
+    10-29 averages are left Stable32's B1 reads flicker PM (alpha 1) and carries it to T/2,
+    giving the last τ — two averages — an edf of 14; the analysis keeps the last ACF reading
+    (white FM) there, edf 1.1, and the fit's tail weights with it."""
+    tau0, n = 0.01, 2**20
+    y = synth_rate(n, tau0, np.random.default_rng(24), 0.0027459, 0.0013239)
+    m = tau_factors(n, min_terms=FIT_MIN_TERMS)
+    stable32 = allan_curves(y, tau0, m, stable32_noise_id=True)[0]
+    ours = allan_curves(y, tau0, m)[0]
+    acf = n // m >= 30  # the lag-1 ACF's factors: unchanged
+    assert np.array_equal(ours.alpha[acf], stable32.alpha[acf])
+    assert np.array_equal(ours.edf[acf], stable32.edf[acf])
+    assert stable32.alpha[~acf].tolist() == [0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1]
+    assert ours.alpha[~acf].tolist() == [0] * 12
+    assert stable32.edf[-1] == pytest.approx(14.22, abs=0.01)
+    assert ours.edf[-1] == pytest.approx(1.10, abs=0.01)
+
+
 def test_the_published_curve_is_the_t4_curve_bit_for_bit(paper_gyro):
     y = paper_gyro.rate(2**14, TAU0, np.random.default_rng(3))
     long = allan_curves(y, TAU0, tau_factors(y.size, min_terms=2))[0]

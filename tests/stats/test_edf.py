@@ -45,7 +45,7 @@ def test_reproduces_stable32_table(case, stable32_inputs):
     y, table_file = stable32_inputs[case]
     table = np.loadtxt(DATA / table_file, comments="#")
     m = table[:, 0].astype(np.int64)
-    (curve,) = allan_curves(y, 1.0, m, confidence=0.683)
+    (curve,) = allan_curves(y, 1.0, m, confidence=0.683, stable32_noise_id=True)
     np.testing.assert_array_equal(curve.n_terms, table[:, 2])
     np.testing.assert_array_equal(curve.alpha, table[:, 3])
     np.testing.assert_allclose(curve.adev, table[:, 5], rtol=1e-4)
