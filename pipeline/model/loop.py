@@ -328,8 +328,9 @@ def goodness(
 
     max |z|, rms z and the flags count the fitted τ range only (z is reported at every τ).
 
-    Bootstrap: AVAR_i* = model_i · χ²_ν/ν at the fitted points, refitted with the same columns
-    (flicker cut-off held at its fitted value); p = share of D* ≥ D.
+    Bootstrap: AVAR_i* = model_i · χ²_ν/ν at the fitted points (ν each point's own edf),
+    refitted with the same columns and the fit's evidence weights (flicker cut-off held at its
+    fitted value); p = share of D* ≥ D.
     """
     model = fit.avar()
     z = ieee952.deviance_residuals(avar, model, edf)
@@ -338,7 +339,7 @@ def goodness(
     rng = np.random.default_rng(952)
     nu = edf[idx]
     sims = model[idx] * rng.chisquare(nu, size=(N_BOOT, len(idx))) / nu
-    boot = np.array([ieee952.fit_nonneg_gamma(fit.design[idx], s, nu)[1] for s in sims])
+    boot = np.array([ieee952.fit_nonneg_gamma(fit.design[idx], s, fit.nu(edf))[1] for s in sims])
     k = int(np.argmax(np.abs(z_in)))
     return Goodness(
         error=fit.deviance / fit.dof,
@@ -1306,6 +1307,6 @@ def _holdout_column(ax: _Axis, state: _State, cand: effects.Candidate) -> dict:
         base = _fit(t_te, a_te, e_te, ax.tau_min)
         idx = base.fit_index
         offset = amp2 * shape(t_te, p)[idx]
-        _, dev = ieee952.fit_nonneg_gamma(base.design[idx], a_te[idx], e_te[idx], offset)
+        _, dev = ieee952.fit_nonneg_gamma(base.design[idx], a_te[idx], base.nu(e_te), offset)
         gains.append(float(base.deviance - dev))
     return {"holds": bool(min(gains) > 0), "deviance_gain_heldout": gains}
