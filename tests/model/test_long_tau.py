@@ -55,6 +55,11 @@ def test_an_octave_of_the_dense_tail_weighs_one_octave_point():
     assert tail.sum() == 7 and np.all(w[~tail] == 1.0)
     np.testing.assert_allclose(w[tail], np.log2(10) / 10, rtol=1e-3)  # 10 τ a decade
     assert np.all(ieee952.evidence_weights(tau, idx, np.inf) == 1.0)
+    every = np.arange(6)
+    weights = ieee952.evidence_weights
+    assert weights(4.0**every, every, 1.0).tolist() == [1] * 6  # 2 octaves a τ: still one point
+    assert weights(2.0**every, every, 3.0).tolist() == [1] * 6  # octaves: the octave points
+    np.testing.assert_allclose(weights(2.0 ** (every / 2), every, 3.0), [1, 1, 1, 1, 0.5, 0.5])
 
 
 def test_an_unresolved_rate_random_walk_bound_covers_the_truth(synth_rate):
