@@ -325,9 +325,10 @@ def _deviance(
 
 @numba.njit(cache=True, nogil=True)
 def _fit_gamma(
-    design: np.ndarray, avar: np.ndarray, edf: np.ndarray, offset: np.ndarray
+    design: np.ndarray, avar: np.ndarray, edf: np.ndarray, offset: np.ndarray, start: np.ndarray
 ) -> tuple[np.ndarray, float]:  # pragma: no cover (JIT)
-    """:func:`fit_nonneg_gamma` compiled: Fisher scoring on unit-norm columns."""
+    """:func:`fit_nonneg_gamma` compiled: Fisher scoring on unit-norm columns, from ``start``
+    (all zero: from nothing, the first step taken whatever its deviance)."""
     n, p = design.shape
     scale = np.zeros(p)
     for i in range(n):  # row by row, as numpy's reduction over axis 0
@@ -341,8 +342,11 @@ def _fit_gamma(
             xs[i, k] = design[i, k] / scale[k]
     floor = 1e-12 * avar.max()
     mu = avar.copy()
-    coef = np.zeros(p)
+    coef = start * scale
     dev = np.inf
+    if np.any(start > 0):  # a warm start: no step may leave it for a worse deviance
+        mu = np.maximum(offset + xs @ coef, floor)
+        dev = _deviance(avar, mu, edf)
     sqrt_edf = np.sqrt(edf)
     target = avar - offset
     new = coef
@@ -375,29 +379,38 @@ def _fit_designs(
     """:func:`fit_nonneg_gamma` of every design (n_fit, n_tau, p) to the same data: the
     cut-off × sign profile of :func:`fit_composite` in one compiled call."""
     offset = np.zeros(avar.size)
+    start = np.zeros(designs.shape[2])
     coefs = np.empty((designs.shape[0], designs.shape[2]))
     devs = np.empty(designs.shape[0])
     for f in range(designs.shape[0]):
-        coef, devs[f] = _fit_gamma(designs[f], avar, edf, offset)
+        coef, devs[f] = _fit_gamma(designs[f], avar, edf, offset, start)
         for k in range(coef.size):  # not a row assignment: see imupipe.jit
             coefs[f, k] = coef[k]
     return coefs, devs
 
 
 def fit_nonneg_gamma(
-    design: np.ndarray, avar: np.ndarray, edf: np.ndarray, offset: np.ndarray | float = 0.0
+    design: np.ndarray,
+    avar: np.ndarray,
+    edf: np.ndarray,
+    offset: np.ndarray | float = 0.0,
+    start: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float]:
     """Minimise the gamma deviance of ``avar`` ~ offset + design @ c over c ≥ 0.
 
     Fisher scoring for the identity link is a weighted NNLS with weights ν/μ² (IRLS) — one
-    small solve per iteration — with step halving so the deviance never increases.
+    small solve per iteration — with step halving so the deviance never increases.  ``start``
+    (c ≥ 0): begin there instead of at 0 — the deviance is not convex in c, and from 0 a first
+    step that drives the model to its floor at a null of an offset column (a sinusoid's AVAR
+    vanishes at τ = k/f) can leave the iteration stuck far from the optimum.
     Returns (c, deviance).
     """
     # writable C-contiguous copies (tiny): the arrays' types of _fit_designs' call, so that
     # _fit_gamma compiles once whoever calls it
     design, avar, edf = (np.array(a, dtype=float, order="C") for a in (design, avar, edf))
     offset = np.array(np.broadcast_to(np.asarray(offset, dtype=float), avar.shape))
-    coef, dev = _fit_gamma(design, avar, edf, offset)
+    start = np.zeros(design.shape[1]) if start is None else np.array(start, dtype=float)
+    coef, dev = _fit_gamma(design, avar, edf, offset, start)
     return coef, float(dev)
 
 
@@ -452,10 +465,12 @@ class CompositeFit:
         idx = self.fit_index
         x, a, nu = self.design[idx], avar[idx], self.nu(edf)
         others = np.delete(x, j, axis=1)
+        at_best = np.delete(self.coef, j)  # each profile fit starts from the fit's optimum
         limit = self.dispersion * chi2_ppf_1dof(level)
 
         def excess(c: float) -> float:
-            return fit_nonneg_gamma(others, a, nu, c * x[:, j])[1] - self.deviance - limit
+            dev = fit_nonneg_gamma(others, a, nu, c * x[:, j], at_best)[1]
+            return dev - self.deviance - limit
 
         best = float(self.coef[j])
         lo = 0.0

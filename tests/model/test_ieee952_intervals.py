@@ -10,6 +10,7 @@ plateau σ = √(2 ln 2 / π) B = 0.6643 B.  Small SI values are compared with `
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -275,3 +276,36 @@ def test_profile_interval_of_a_column_the_data_do_not_bound_is_open_above() -> N
     lo, hi = null.profile_interval(avar, edf, 1)  # N², the 1/τ column
     assert 0.0 < lo < fit.coef[1] < hi < np.inf
     assert lo < 1e-6 < hi  # the true N² (data: N = 1e-3 with gamma scatter)
+
+
+def test_profile_of_a_sinusoid_column_starts_from_the_optimum() -> None:
+    """A loop candidate's profile (independent generator, a size-10 sinusoid on accel_z, 2 h at
+    100 Hz, panel seed 700005; tests/data/profile_sinusoid_null.npz): refitting the other
+    terms from zero under the sinusoid's column, whose AVAR vanishes at τ = k/f, stuck the
+    iteration at the model's floor (deviance 7e12 against the fit's 5837) and brentq raised —
+    the analysis crashed. Each profile fit now starts from the fit's own optimum."""
+    case = np.load(Path(__file__).parents[1] / "data" / "profile_sinusoid_null.npz")
+    fit = ieee952.CompositeFit(
+        tuple(case["names"]),
+        case["coef"],
+        case["design"],
+        case["fit_index"],
+        float(case["deviance"]),
+        int(case["dof"]),
+        float(case["cutoff_hz"]),
+        int(case["short_sign"]),
+        case["weight"],
+    )
+    j = int(case["j"])
+    lo, hi = fit.profile_interval(case["avar"], case["edf"], j, float(case["level"]))
+    assert lo == 0.0  # the baseline's dispersion (D/dof 730) does not bound it from below
+    assert hi / fit.coef[j] == pytest.approx(1.7142, rel=1e-3)
+    others = np.delete(fit.design[fit.fit_index], j, axis=1)
+    offset = fit.coef[j] * fit.design[fit.fit_index, j]
+    nu = fit.nu(case["edf"])
+    at_best = np.delete(fit.coef, j)
+    avar = case["avar"][fit.fit_index]
+    assert ieee952.fit_nonneg_gamma(others, avar, nu, offset, at_best)[1] == pytest.approx(
+        fit.deviance, rel=1e-9
+    )
+    assert ieee952.fit_nonneg_gamma(others, avar, nu, offset)[1] > 1e9  # from zero: stuck
