@@ -159,7 +159,8 @@ class NoisePsd:
     """Two-sided rate PSD (u²/Hz) of an IEEE 952 model (Annex C), see module doc.
 
     ``white`` = N², ``flicker`` = B² (cut off above ``cutoff_hz``), ``rrw`` = K²,
-    ``gauss_markov`` = ((σ², Tc), ...).
+    ``gauss_markov`` = ((σ², Tc), ...), ``lines`` = ((σ², centre Hz, width Hz), ...): spread
+    lines, the PSD of :func:`oscillator_avar`'s damped oscillator.
     """
 
     white: float
@@ -167,6 +168,7 @@ class NoisePsd:
     cutoff_hz: float
     rrw: float
     gauss_markov: tuple[tuple[float, float], ...] = ()
+    lines: tuple[tuple[float, float, float], ...] = ()
 
     def at(self, f: np.ndarray) -> np.ndarray:
         w = 2 * np.pi * np.asarray(f, dtype=float)
@@ -174,7 +176,15 @@ class NoisePsd:
             s = self.white + np.where(f <= self.cutoff_hz, self.flicker / w, 0.0) + self.rrw / w**2
         for var, tc in self.gauss_markov:
             s = s + 2 * var * tc / (1 + (w * tc) ** 2)
+        for var, centre, width in self.lines:  # 4aω0² / ((ω0² − ω²)² + 4a²ω²), ∫ = 1
+            a = np.pi * width
+            w0 = (2 * np.pi * centre) ** 2 + a**2
+            s = s + var * 4 * a * w0 / ((w0 - w**2) ** 2 + 4 * a**2 * w**2)
         return s
+
+
+NUGGET = 1e-9
+"""Relative white floor added to the whitened differences' variance γ(0) (:class:`Whitener`)."""
 
 
 class Whitener:
@@ -200,10 +210,14 @@ class Whitener:
         nu[0] = 1e-6 * nu[1]
         x = nu * self.span
         images = np.arange(-8, 9)[:, None]
-        coloured = NoisePsd(0.0, psd.flicker, psd.cutoff_hz, psd.rrw, psd.gauss_markov)
+        coloured = NoisePsd(0.0, psd.flicker, psd.cutoff_hz, psd.rrw, psd.gauss_markov, psd.lines)
         fold = np.sum(coloured.at(np.abs(nu + images / self.span)) / (np.pi * (x + images)) ** 2, 0)
         s_diff = 4 * np.sin(np.pi * x) ** 2 * (psd.white + np.sin(np.pi * x) ** 2 * fold)
         gamma = np.fft.irfft(s_diff, grid)[:m] / self.span
+        # a nugget of NUGGET γ(0): a model without white noise (a baseline whose N went to 0
+        # under a strong line's hump) has a band-limited spectrum whose Toeplitz covariance is
+        # singular to rounding; its innovations' variances went negative (NaN errors)
+        gamma[0] *= 1.0 + NUGGET
         self.inv_chol = _innovations(gamma)
         # whitened constant difference: a linear rate ramp, the model's R term (nuisance)
         self.drift = self.inv_chol @ np.ones(m)

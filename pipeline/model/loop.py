@@ -233,15 +233,14 @@ class _State:
     spikes: SparseCorrection | None  # removed from the full-rate series (AxisSignals.y)
     columns: dict[str, np.ndarray] = field(default_factory=dict)
     n_nonlinear: int = 0
-    column_params: dict[str, float] = field(default_factory=dict)  # first shape parameter
     avar_d: np.ndarray | None = None  # AVAR of y_d at the decimated factors (cache)
     # (kind, shape parameters of ieee952.effect_shape) of each column
     effect_parameters: dict[str, tuple[str, tuple]] = field(default_factory=dict)
 
     def with_column(self, name: str, cand: effects.Candidate, spec: tuple) -> _State:
         """This state with the AVAR-column candidate ``cand`` (shape parameters ``spec``) added
-        as column ``name``: its non-linear parameters counted, a Gauss–Markov Tc kept for the
-        time-domain model, its shape recorded."""
+        as column ``name``: its non-linear parameters counted, its shape recorded (the
+        time-domain model reads it: :func:`noise_psd`, :func:`time_domain_fit`)."""
         kind = cand.kind
         return _State(
             self.avar,
@@ -249,7 +248,6 @@ class _State:
             self.spikes,
             self.columns | {name: cand.column},
             self.n_nonlinear + N_SHAPE[kind],
-            self.column_params | ({name: spec[0]} if kind == "gauss_markov" else {}),
             effect_parameters=self.effect_parameters | {name: (kind, cand.evidence["shape"])},
         )
 
@@ -728,16 +726,20 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         time_error_after=(
             time_before
             if fit is fit0
-            else time_domain_error(fit, state.column_params, state.y_d, ax.dt)
+            else time_domain_error(fit, state.effect_parameters, state.y_d, ax.dt)
         ),
     )
 
 
+Shapes = dict[str, tuple[str, tuple]]
+"""Each extra AVAR column's (kind, shape parameters) (``_State.effect_parameters``)."""
+
+
 def time_domain_error(
-    fit: ieee952.CompositeFit, column_params: dict[str, float], y_d: np.ndarray, dt: float
+    fit: ieee952.CompositeFit, shapes: Shapes, y_d: np.ndarray, dt: float
 ) -> float:
     """:func:`time_domain_fit`'s error alone."""
-    return time_domain_fit(fit, column_params, y_d, dt)[0]
+    return time_domain_fit(fit, shapes, y_d, dt)[0]
 
 
 class TimeFit(NamedTuple):
@@ -758,21 +760,29 @@ class TimeFit(NamedTuple):
 
 
 def time_domain_fit(
-    fit: ieee952.CompositeFit, column_params: dict[str, float], y_d: np.ndarray, dt: float
+    fit: ieee952.CompositeFit, shapes: Shapes, y_d: np.ndarray, dt: float
 ) -> TimeFit:
     """The time-domain error of a fitted model on the block means ``y_d`` (block ``dt`` s),
     with its degrees of freedom m − 1 and ln det Σ (:class:`TimeFit`):
     the mean square of the whitened residual — the first differences of the coarse block means
     (:class:`effects.Whitener`, ≤ 1024 blocks) turned into standardised one-step prediction
     errors under the model's rate PSD (:func:`noise_psd`), the linear-ramp nuisance projected
-    out — Σ e² / (m − 1).  ≈ 1 (χ²_{m−1}/(m − 1)) when the model describes the series at
-    τ ≥ the coarse block; above 1 when the series holds what the model lacks.  It sees only
-    the slow part (τ ≥ T/1024) and no AVAR-only term (a sinusoid stays in the series)."""
-    whiten = effects.Whitener(noise_psd(fit, column_params), len(y_d), dt)
+    out, and so are a sine and a cosine at each modelled sinusoid's frequency (a deterministic
+    line is no noise to whiten; left in the series, a slow one the loop had explained raised
+    this error 10-60 fold on the independent generator; a spread line is in the PSD) —
+    Σ e² / (m − 1 − 2 sinusoids).  ≈ 1 (χ²/dof) when the model describes the series at
+    τ ≥ the coarse block; above 1 when the series holds what the model lacks.  It sees only the
+    slow part (τ ≥ T/1024; a faster line as its block means' alias)."""
+    whiten = effects.Whitener(noise_psd(fit, shapes), len(y_d), dt)
     yw = whiten(y_d)
-    u = whiten.drift
-    r = yw - u * float(u @ yw) / float(u @ u)
-    dof = max(len(r) - 1, 1)
+    t = (np.arange(len(y_d)) + 0.5) * dt  # block centres: a block mean of a line is in phase
+    tones = [shape[0] for kind, shape in shapes.values() if kind == "sinusoid"]
+    u = np.column_stack(
+        [whiten.drift]
+        + [whiten(wave(2 * np.pi * f * t)) for f in tones for wave in (np.sin, np.cos)]
+    )
+    r = yw - u @ np.linalg.lstsq(u, yw, rcond=None)[0]
+    dof = max(len(r) - u.shape[1], 1)
     log_det = -2 * float(np.sum(np.log(np.diag(whiten.inv_chol))))  # L⁻¹ diag: 1/√v_t
     return TimeFit(float(r @ r) / dof, dof, log_det)
 
@@ -814,16 +824,23 @@ def _judge(
     return float(delta_bic), flags_ok
 
 
-def noise_psd(fit: ieee952.CompositeFit, column_params: dict[str, float]) -> effects.NoisePsd:
-    """Rate PSD of a fitted composite model (IEEE 952 Annex C; see :class:`effects.NoisePsd`).
+def noise_psd(fit: ieee952.CompositeFit, shapes: Shapes) -> effects.NoisePsd:
+    """Rate PSD of a fitted composite model (IEEE 952 Annex C; see :class:`effects.NoisePsd`),
+    with its Gauss–Markov and spread-line columns (σ² the column's coefficient).
 
-    Deterministic terms (rate ramp, sinusoid) and quantisation (negligible on ~1 s block
-    means) are left out.
+    Deterministic terms (rate ramp, sinusoid: nuisance regressors of :func:`time_domain_fit`),
+    the prefilter and quantisation (negligible on ~1 s block means) are left out.
     """
     coef = dict(zip(fit.names, fit.coef, strict=True))
-    gm = tuple((coef[k], column_params[k]) for k in ("gauss_markov",) if k in coef)
+    gm = tuple((coef[k], s[0]) for k, (kind, s) in shapes.items() if kind == "gauss_markov")
+    lines = tuple((coef[k], *s) for k, (kind, s) in shapes.items() if kind == "narrowband")
     return effects.NoisePsd(
-        coef["random_walk"], coef["bias_instability"], fit.cutoff_hz, coef["rate_random_walk"], gm
+        coef["random_walk"],
+        coef["bias_instability"],
+        fit.cutoff_hz,
+        coef["rate_random_walk"],
+        gm,
+        lines,
     )
 
 
@@ -833,11 +850,11 @@ def _ramp_whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis) -> effec
     looks like a trend; with K underestimated (unresolved, or soaked into B) the GLS would read
     that wander as a ramp — measured: false ramps on clean axes of the independent generator,
     whose axes all carry K.  At 95 % the bound hid a 12 B ramp (which inflates K's bound)."""
-    psd = noise_psd(fit, state.column_params)
+    psd = noise_psd(fit, state.effect_parameters)
     j = fit.names.index("rate_random_walk")
     k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
     k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: the fitted K
-    upper = effects.NoisePsd(psd.white, psd.flicker, psd.cutoff_hz, k2, psd.gauss_markov)
+    upper = replace(psd, rrw=k2)
     return effects.Whitener(upper, len(state.y_d), ax.dt)
 
 
@@ -849,11 +866,11 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     had soaked part of the effect into K and R: a joint fit of noise model and effect).
     """
     tau, edf, dt = ax.tau, ax.edf, ax.dt
-    whiten = effects.Whitener(noise_psd(fit, state.column_params), len(state.y_d), dt)
-    time_old = time_domain_fit(fit, state.column_params, state.y_d, dt)
+    whiten = effects.Whitener(noise_psd(fit, state.effect_parameters), len(state.y_d), dt)
+    time_old = time_domain_fit(fit, state.effect_parameters, state.y_d, dt)
 
     def errors(fit_new: ieee952.CompositeFit, new_state: _State, kind: str) -> ErrorChange:
-        time_new = time_domain_fit(fit_new, new_state.column_params, new_state.y_d, dt)
+        time_new = time_domain_fit(fit_new, new_state.effect_parameters, new_state.y_d, dt)
         return ErrorChange.between(
             fit,
             fit_new,
@@ -883,7 +900,9 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
             refined = (
                 _ramp_whitener(fit_new, new_state, ax)
                 if cand.kind == "ramp"
-                else effects.Whitener(noise_psd(fit_new, state.column_params), len(state.y_d), dt)
+                else effects.Whitener(
+                    noise_psd(fit_new, state.effect_parameters), len(state.y_d), dt
+                )
             )
             cand.refit(refined, state.y_d)
             new_state = _corrected_state(ax, state, cand)
@@ -1030,7 +1049,6 @@ def _corrected_state(ax: _Axis, state: _State, cand: effects.Candidate) -> _Stat
         state.spikes if cand.spikes is None else cand.spikes,
         state.columns,
         state.n_nonlinear,
-        state.column_params,
         effect_parameters=state.effect_parameters,
     )
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from imupipe.model import effects
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
 from imupipe.stats.allan import allan_curves
 
@@ -54,3 +55,24 @@ def test_time_error_falls_when_a_real_effect_is_removed() -> None:
     # systematic (both on the same series): 1.046 -> 0.992 for this seed
     assert res.time_error_before - res.time_error_after > 0.03
     assert 0.9 < res.time_error_after < 1.05
+
+
+@pytest.mark.parametrize("period_s", [600.0, 97.0])
+def test_time_error_after_a_slow_sinusoid_is_about_one(period_s: float) -> None:
+    """A slow sinusoid (the independent generator's: 10-60 × the time-domain error left after
+    the loop had modelled it) is a deterministic line: its sine and cosine are projected out of
+    the whitened series, so once the loop has modelled it the error is back near 1."""
+    t = np.arange(N) * TAU0
+    res = run(noise(11) + 3e-4 * np.sin(2 * np.pi * t / period_s + 0.4))
+    assert [e.kind for e in res.accepted][:1] == ["sinusoid"]
+    assert res.accepted[0].params["frequency_hz"] == pytest.approx(1 / period_s, rel=2e-3)
+    assert 0.85 < res.time_error_after < 1.2
+
+
+def test_a_spread_line_psd_holds_its_variance() -> None:
+    """The spread line of the time-domain PSD (:class:`effects.NoisePsd` ``lines``) is the
+    damped oscillator's two-sided PSD scaled to the column's σ²: ∫ S df over ±f = σ²."""
+    psd = effects.NoisePsd(0.0, 0.0, np.inf, 0.0, (), ((2.5e-7, 0.3, 0.01),))
+    f = np.linspace(1e-9, 50.0, 2_000_001)
+    assert 2 * np.trapezoid(psd.at(f), f) == pytest.approx(2.5e-7, rel=2e-3)
+    assert f[np.argmax(psd.at(f))] == pytest.approx(0.3, abs=1e-4)
