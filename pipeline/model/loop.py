@@ -237,9 +237,9 @@ class _State:
     # (kind, shape parameters of ieee952.effect_shape) of each column
     effect_parameters: dict[str, tuple[str, tuple]] = field(default_factory=dict)
 
-    def with_column(self, name: str, cand: effects.Candidate, spec: tuple) -> _State:
-        """This state with the AVAR-column candidate ``cand`` (shape parameters ``spec``) added
-        as column ``name``: its non-linear parameters counted, its shape recorded (the
+    def with_column(self, name: str, cand: effects.Candidate) -> _State:
+        """This state with the AVAR-column candidate ``cand`` added as column ``name``: its
+        non-linear parameters counted, its shape (``cand.evidence["shape"]``) recorded (the
         time-domain model reads it: :func:`noise_psd`, :func:`time_domain_fit`)."""
         kind = cand.kind
         return _State(
@@ -961,7 +961,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         if centre is not None:  # a narrowband line: its centre is the spectrum's
             cand.evidence["spectrum_centre"] = centre
             cand.intervals["frequency_hz"] = [centre["frequency_lo"], centre["frequency_hi"]]
-        new_state = state.with_column(name, cand, spec)
+        new_state = state.with_column(name, cand)
         fit_named = new_state.fit(ax)
         k = N_SHAPE[kind] + 1
         dbic, flags_ok = _judge(kind, fit_named, fit, good, k, tau, state.avar, edf)
@@ -1014,7 +1014,7 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
     cand = _column_candidate("narrowband", spec, fit_line, state, full)
     cand.evidence["spectrum_centre"] = centre  # the centre is the spectrum's, as in the range
     cand.intervals["frequency_hz"] = [centre["frequency_lo"], centre["frequency_hi"]]
-    new_state = state.with_column(name, cand, spec)
+    new_state = state.with_column(name, cand)
     tau_min, note = ieee952.fit_start(
         tau,
         state.avar,
