@@ -64,10 +64,11 @@ MAX_ROUNDS = 6
 RAMP_K_LEVEL = 0.68  # K of the ramp test's whitener: upper end of this profile interval
 N_BOOT = 200
 AVAR_ONLY = frozenset({"sinusoid", "narrowband", "prefilter"})
-"""AVAR terms outside the time-domain error's model (:func:`noise_psd` has no line and no
-prefilter; the series keeps the term): adding one returns the power the noise terms had
-absorbed, so that error rises (measured: a 3e-4 rad/s sinusoid at 0.02 Hz, 1.11 → 1.72) without
-the fit being worse.  Their time-domain error is reported, not judged."""
+"""AVAR terms whose acceptance the time-domain error does not judge (reported only).  The
+prefilter is outside its model; lines are in it since session 7 (a sinusoid projected out of
+the whitened series, a spread line in :func:`noise_psd`) — before, a modelled line stayed in the
+series and that error rose (a 3e-4 rad/s sinusoid at 0.02 Hz: 1.11 → 1.72).  Judging lines on
+it too is not done: it would change the loop's decisions, which were validated without it."""
 RAMP_KINDS = frozenset({"ramp"})
 """Corrections neither error can show: a linear rate ramp is the time-domain error's nuisance
 (projected out) and the Allan model's R term (measured: a 1.1e-7 rad/s² ramp on 1.4 h, GLS
