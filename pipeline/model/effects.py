@@ -23,7 +23,7 @@ Two families (issue 4):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numba
 import numpy as np
@@ -67,6 +67,16 @@ def gauss_markov_avar(tau: np.ndarray, tc: float) -> np.ndarray:
     """AVAR of a unit-variance first-order Gauss–Markov process with correlation time ``tc`` (s)."""
     a = tau / tc
     return 2 * tc / tau * (1 - (3 - 4 * np.exp(-a) + np.exp(-2 * a)) / (2 * a))
+
+
+def oscillator_psd(f: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
+    """Two-sided PSD (1/Hz) at ``f`` (Hz) of the unit-variance damped oscillator of
+    :func:`oscillator_avar`: S(f) = 4aω0² / ((ω0² − ω²)² + 4a²ω²), ω = 2πf,
+    a = π ``width_hz`` (full width at half power), ω0² = (2π ``f0``)² + a² (Papoulis §10)."""
+    a = np.pi * width_hz
+    w0_sq = (2 * np.pi * f0) ** 2 + a * a
+    w_sq = (2 * np.pi * np.asarray(f, dtype=float)) ** 2
+    return 4 * a * w0_sq / ((w0_sq - w_sq) ** 2 + 4 * a * a * w_sq)
 
 
 def oscillator_avar(tau: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
@@ -176,10 +186,8 @@ class NoisePsd:
             s = self.white + np.where(f <= self.cutoff_hz, self.flicker / w, 0.0) + self.rrw / w**2
         for var, tc in self.gauss_markov:
             s = s + 2 * var * tc / (1 + (w * tc) ** 2)
-        for var, centre, width in self.lines:  # 4aω0² / ((ω0² − ω²)² + 4a²ω²), ∫ = 1
-            a = np.pi * width
-            w0 = (2 * np.pi * centre) ** 2 + a**2
-            s = s + var * 4 * a * w0 / ((w0 - w**2) ** 2 + 4 * a**2 * w**2)
+        for var, centre, width in self.lines:
+            s = s + var * oscillator_psd(f, centre, width)
         return s
 
 
@@ -210,7 +218,7 @@ class Whitener:
         nu[0] = 1e-6 * nu[1]
         x = nu * self.span
         images = np.arange(-8, 9)[:, None]
-        coloured = NoisePsd(0.0, psd.flicker, psd.cutoff_hz, psd.rrw, psd.gauss_markov, psd.lines)
+        coloured = replace(psd, white=0.0)
         fold = np.sum(coloured.at(np.abs(nu + images / self.span)) / (np.pi * (x + images)) ** 2, 0)
         s_diff = 4 * np.sin(np.pi * x) ** 2 * (psd.white + np.sin(np.pi * x) ** 2 * fold)
         gamma = np.fft.irfft(s_diff, grid)[:m] / self.span

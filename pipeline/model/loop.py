@@ -338,7 +338,8 @@ def goodness(
     rng = np.random.default_rng(952)
     nu = edf[idx]
     sims = model[idx] * rng.chisquare(nu, size=(N_BOOT, len(idx))) / nu
-    boot = np.array([ieee952.fit_nonneg_gamma(fit.design[idx], s, fit.nu(edf))[1] for s in sims])
+    nu_fit = fit.nu(edf)
+    boot = np.array([ieee952.fit_nonneg_gamma(fit.design[idx], s, nu_fit)[1] for s in sims])
     k = int(np.argmax(np.abs(z_in)))
     return Goodness(
         error=fit.deviance / fit.dof,

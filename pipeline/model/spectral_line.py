@@ -23,6 +23,7 @@ import numpy as np
 from scipy import optimize
 
 from imupipe.model import ieee952
+from imupipe.model.effects import oscillator_psd
 from imupipe.vocab import CHI2_95
 
 CENTRE_SPAN = 8.0  # an interval edge beyond the estimate ± this many widths is censored there
@@ -33,16 +34,6 @@ COARSE_ORDINATES = 2048
 """The coarse search reads a band of more ordinates than this as means of consecutive ones."""
 POOLS_PER_WIDTH = 32
 """The fine fit pools consecutive ordinates spanning at most the coarse width / this."""
-
-
-def oscillator_psd(f: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
-    """Two-sided PSD (1/Hz) at ``f`` (Hz) of the unit-variance damped oscillator of
-    :func:`effects.oscillator_avar`: S(f) = 4aω0² / ((ω0² − ω²)² + 4a²ω²), ω = 2πf,
-    a = π ``width_hz`` (full width at half power), ω0² = (2π ``f0``)² + a² (Papoulis §10)."""
-    a = np.pi * width_hz
-    w0_sq = (2 * np.pi * f0) ** 2 + a * a
-    w_sq = (2 * np.pi * np.asarray(f, dtype=float)) ** 2
-    return 4 * a * w0_sq / ((w0_sq - w_sq) ** 2 + 4 * a * a * w_sq)
 
 
 @dataclass(frozen=True)
