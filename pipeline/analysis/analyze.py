@@ -273,7 +273,7 @@ def find_axis_events(
     if not means:
         return None, stuck, searched
     units = {a: "rad/s" if sensor_of(a) == "gyro" else "m/s^2" for a in means}
-    found = detect(means, series.tau0_s, series.samples, units, t0_stamp_s)
+    found = detect(means, series.tau0_s, series.samples, units, t0_stamp_s, series.excluded)
     return found, stuck, searched
 
 

@@ -48,6 +48,7 @@ from typing import Literal
 import numpy as np
 from scipy import optimize, special
 
+from imupipe.analysis.condition import fill_runs
 from imupipe.model.effects import Candidate
 from imupipe.stats import robust
 
@@ -369,11 +370,14 @@ def _adjacent_difference_scale(x: np.ndarray, width: int) -> float:
 def find_events(
     means: dict[str, np.ndarray], dt: float, samples_per_block: int, n_samples: int,
     units: dict[str, str] | None = None, false_alarm: float = FALSE_ALARM,
+    blocks: np.ndarray | None = None,
 ) -> tuple[list[DisturbanceEvent], EventDetector]:  # fmt: skip
     """Events in the fine block means of the axes (``means``: {axis: (n_blocks,)}, equal
     lengths; ``dt`` s per block of ``samples_per_block`` samples; the record has ``n_samples``
     samples), found and classified as in the module docstring, at the record-wide
-    ``false_alarm`` probability."""
+    ``false_alarm`` probability.  ``blocks``: the place on the record's block grid of each
+    mean when some blocks were left out (:func:`detect`: blocks touching a gap); the events'
+    times and excised samples are given on that grid."""
     names = tuple(means)
     x = np.column_stack([means[a] for a in names])
     scales = _scales(x, dt)
@@ -418,7 +422,8 @@ def find_events(
         touched = np.flatnonzero(np.max(ratios_a[members], axis=0) > 1)
         events.append(
             _event(x, names, touched, first, stop, zmax, fine_v, dt, samples_per_block,
-                   n_samples, z_step, units or {}, max(lengths[i] for i in members) * dt)
+                   n_samples, z_step, units or {}, max(lengths[i] for i in members) * dt,
+                   np.arange(len(x)) if blocks is None else blocks)
         )  # fmt: skip
     return events, detector
 
@@ -431,9 +436,10 @@ def _level(x: np.ndarray, lo: int, hi: int) -> np.ndarray:
 def _event(
     x: np.ndarray, names: tuple[str, ...], touched: np.ndarray, first: int, stop: int,
     zmax: np.ndarray, fine_v: np.ndarray, dt: float, per_block: int, n_samples: int,
-    z_step: float, units: dict[str, str], scale_s: float,
+    z_step: float, units: dict[str, str], scale_s: float, blocks: np.ndarray,
 ) -> DisturbanceEvent:  # fmt: skip
-    """One merged component of flagged windows as an event (steps 4–5)."""
+    """One merged component of flagged windows as an event (steps 4–5); ``blocks``: each
+    row of ``x``'s place on the record's block grid (times and excision are on the grid)."""
     span = max(stop - first, round(LEVEL_SPAN_S / dt))
     outside = np.concatenate([x[max(first - span, 0) : first], x[stop : stop + span]])
     level = np.median(outside, axis=0) if len(outside) else np.median(x, axis=0)
@@ -451,6 +457,7 @@ def _event(
     is_step = bool(
         abs(change[main]) > z_step * se and abs(change[main]) > STEP_FRACTION * abs(size[main])
     )
+    a, b = int(blocks[a]), int(blocks[b - 1]) + 1  # on the record's grid from here
     excised = None
     if not is_step:
         margin = max(MARGIN_S, MARGIN_FRACTION * (b - a) * dt)
@@ -517,25 +524,31 @@ class EventsFound:
 
 def detect(
     means: dict[str, np.ndarray], tau0: float, n_samples: int, units: dict[str, str],
-    t0_stamp_s: float,
+    t0_stamp_s: float, excluded: np.ndarray | None = None,
 ) -> EventsFound:  # fmt: skip
-    """:func:`find_events` on the :func:`fine_means` of the analysed axes."""
+    """:func:`find_events` on the :func:`fine_means` of the analysed axes.  ``excluded``
+    (n_samples,) bool, the samples masked by the gap policy ``"mask"``: every fine block
+    touching one is left out and the blocks either side of a gap are joined, so neither a
+    gap's interpolated fill nor the gap itself is taken for an event (a level that differs
+    across a gap shows as a step there)."""
     b = fine_block(tau0)
-    events, detector = find_events(means, b * tau0, b, n_samples, units)
+    blocks = None
+    if excluded is not None and np.any(excluded):
+        n_blocks = len(next(iter(means.values())))
+        blocks = np.flatnonzero(~excluded[: n_blocks * b].reshape(n_blocks, b).any(axis=1))
+        means = {a: m[blocks] for a, m in means.items()}
+    events, detector = find_events(means, b * tau0, b, n_samples, units, blocks=blocks)
     return EventsFound(detector, tuple(events), tau0, t0_stamp_s)
 
 
 def fill_excised(y: np.ndarray, events: EventsFound) -> np.ndarray:
     """``y`` with every excised event's samples replaced by the straight line between the
-    means of the fine block before and after it (a copy; ``y`` itself when none is excised):
-    what the loop's time-domain steps see there (its Allan sums skip those samples)."""
-    cut = [e.excised for e in events.events if e.excised is not None]
-    if not cut:
+    means of the fine block before and after it (:func:`imupipe.analysis.condition.fill_runs`;
+    a copy, ``y`` itself when none is excised): what the loop's time-domain steps see there
+    (its Allan sums skip those samples)."""
+    cut = event_mask(list(events.events), len(y))
+    if cut is None:
         return y
     y = np.array(y, dtype=float)
-    k = fine_block(events.tau0_s)
-    for a, b in cut:
-        left = y[max(0, a - k) : a].mean() if a > 0 else y[b : b + k].mean()
-        right = y[b : b + k].mean() if b < len(y) else left
-        y[a:b] = np.linspace(left, right, b - a + 2)[1:-1]
+    fill_runs(y, cut, fine_block(events.tau0_s))
     return y

@@ -8,7 +8,7 @@ import numpy as np
 import polars as pl
 import pytest
 
-from imupipe.analysis.condition import condition, unanalysable
+from imupipe.analysis.condition import condition, fill_runs, unanalysable
 from imupipe.errors import ImupipeError
 from imupipe.io.decode import ImuRecording
 from imupipe.vocab import AXES
@@ -258,8 +258,25 @@ def test_mask_policy_keeps_the_whole_recording_around_a_missing_frame() -> None:
     assert not any("longest clean segment" in w for w in s.warnings)
     x = rec.frames["gyro_x"][s.rows].to_numpy()
     y = s.on_grid(x)
-    assert y[300] == pytest.approx((x[299] + x[300]) / 2)  # the hole, linearly filled
+    # each hole: the mean of the 0.5 s (50 samples) of usable data either side, not of the
+    # two neighbouring samples (a whole sample-noise sigma off: an event at every gap)
+    assert y[300] == pytest.approx((x[250:300].mean() + x[300:350].mean()) / 2, rel=1e-12)
+    assert y[701] == pytest.approx((x[650:700].mean() + x[701:751].mean()) / 2, rel=1e-12)
     assert y[702] == x[701] and np.isfinite(y).all()
+
+
+def test_fill_runs_draws_a_line_between_the_means_either_side() -> None:
+    y = np.arange(20.0)
+    holes = np.zeros(20, dtype=bool)
+    holes[[0, 1, 5, 6, 7, 12, 19]] = True
+    holes[9] = True  # a hole inside the right span of 5..7: left out of its mean
+    fill_runs(y, holes, 3)
+    # 0-1: the record starts there, so the mean after, of 2, 3, 4; 5-7: from mean(2, 3, 4) = 3
+    # to mean(8, 10) = 9 (9 is a hole); 9: from 8 (6, 7 are holes) to mean(10, 11) = 10.5
+    # (12 is a hole); 12: from 10.5 to mean(13, 14, 15) = 14; 19: the record ends, 17 alone
+    np.testing.assert_allclose(
+        y, [3, 3, 2, 3, 4, 4.5, 6, 7.5, 8, 9.25, 10, 11, 12.25, 13, 14, 15, 16, 17, 18, 17]
+    )
 
 
 def test_mask_policy_falls_back_when_most_of_the_grid_is_a_gap() -> None:

@@ -285,3 +285,26 @@ def test_fill_excised_draws_a_line_between_the_levels_either_side() -> None:
     assert filled[:100].tolist() == y[:100].tolist() and y[120] == 50.0
     mask = ev.event_mask([event], 240)
     assert mask.sum() == 40 and mask[100] and not mask[140]
+
+
+def test_blocks_touching_a_gap_are_left_out_and_events_stay_on_the_record_grid() -> None:
+    """Gap policy "mask": the blocks touching masked samples are left out and the blocks either
+    side joined.  A gap whose fill sits 1.5 block sigmas off on every axis (what the fill from
+    the two neighbouring samples did) is no event; a box after the gap is found where it is on
+    the record's grid, and excised there."""
+    means = unit_means(5)
+    z1, _, sigma = limits(means)
+    gap = slice(4_000, 4_704)  # blocks (352 s: the box stays aligned with the 8 s windows)
+    for j, a in enumerate(AXES):
+        means[a][gap] += 1.5 * sigma[j]
+    means = with_box(means, {"gyro_z": 1.3 * z1}, sigma)
+    excluded = np.zeros(BLOCKS * 50, dtype=bool)
+    excluded[gap.start * 50 + 7 : gap.stop * 50 - 3] = True  # partial end blocks left out too
+    units = dict.fromkeys(AXES, "rad/s")
+    unmasked = ev.detect(means, DT / 50, BLOCKS * 50, units, 0.0).events
+    assert any(e.start_s < gap.stop * DT and len(e.axes) == 6 for e in unmasked)
+    (event,) = ev.detect(means, DT / 50, BLOCKS * 50, units, 0.0, excluded).events
+    assert event.axes == ("gyro_z",) and event.start_s == pytest.approx(AT * DT, abs=2 * DT)
+    assert event.duration_s == pytest.approx(BOX * DT, abs=2 * DT)
+    a, b = event.excised
+    assert a <= AT * 50 < (AT + BOX) * 50 <= b < (AT + BOX + 10) * 50
