@@ -39,6 +39,7 @@ class Source(StrEnum):
 
 
 class GapPolicy(StrEnum):
+    auto = "auto"
     longest = "longest"
     fail = "fail"
     mask = "mask"
@@ -224,10 +225,11 @@ def analyze(
     gaps: Annotated[
         GapPolicy,
         typer.Option(
-            help="longest: analyse the longest clean segment; fail: refuse; mask: analyse the "
-            "whole recording, skipping the Allan terms that touch a gap or bad frame."
+            help="auto: mask if no gap is longer than 5 s, else longest; longest: analyse "
+            "the longest clean segment; fail: refuse; mask: analyse the whole recording, "
+            "skipping the Allan terms that touch a gap or bad frame."
         ),
-    ] = GapPolicy.longest,
+    ] = GapPolicy.auto,
     rrd: Annotated[bool, typer.Option(help="Write recording.rrd for the Rerun viewer.")] = True,
     rrd_full: Annotated[
         bool,
@@ -427,7 +429,7 @@ def fleet(
         Path | None, typer.Option(help="Datasheet TOML to check every unit and the lot against.")
     ] = None,
     taus_per_decade: Annotated[int, typer.Option(min=4, max=100)] = 10,
-    gaps: Annotated[GapPolicy, typer.Option(help="As imupipe analyze.")] = GapPolicy.longest,
+    gaps: Annotated[GapPolicy, typer.Option(help="As imupipe analyze.")] = GapPolicy.auto,
     rrd: Annotated[bool, typer.Option(help="Write each unit's recording.rrd and fleet.rrd.")] = (
         True
     ),

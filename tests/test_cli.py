@@ -131,7 +131,7 @@ def test_bad_input_exits_2_with_one_line(runs, cases, case: str, cli) -> None:
 def test_usage_error_is_short_and_not_a_traceback(runs) -> None:
     code, _, stderr = runs["bad_option"]
     assert code == 2 and "Traceback" not in stderr
-    assert "'sometimes' is not one of 'longest', 'fail', 'mask'" in stderr
+    assert "'sometimes' is not one of 'auto', 'longest', 'fail', 'mask'" in stderr
 
 
 def test_good_recording_exits_0_with_reports(runs, workdir: Path) -> None:

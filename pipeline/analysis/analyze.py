@@ -75,7 +75,7 @@ AxisMap = Callable[[Callable[[str], object], Iterable[str]], Iterator[object]]
 class AnalyzeOptions:
     topic: str | None = None
     taus_per_decade: int = 10
-    gaps: GapPolicy = "longest"
+    gaps: GapPolicy = "auto"
     loop: bool = True
     rrd: bool = True
     rrd_full: bool = False

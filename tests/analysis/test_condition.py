@@ -62,7 +62,7 @@ def test_one_missing_frame_splits_and_longest_is_chosen() -> None:
         return fn
 
     rec = recording(stamp_ns=missing(300), counter=missing(300))
-    s = condition(rec)
+    s = condition(rec, gaps="longest")
     assert [seg.frames for seg in s.segments] == [300, 700]
     assert s.segment.frames == 700 and s.chosen == 1 and s.rows == slice(300, 1000)
     assert s.counts["missed_frames"] == 1
@@ -70,6 +70,29 @@ def test_one_missing_frame_splits_and_longest_is_chosen() -> None:
     assert any("longest clean segment" in w for w in s.warnings)
     with pytest.raises(ImupipeError, match="segments"):
         condition(rec, gaps="fail")
+    # the default masks a gap this short: the whole recording, the lost frame's place excluded
+    auto = condition(rec)
+    assert auto.rows == slice(0, 1000) and np.flatnonzero(auto.excluded).tolist() == [300]
+    assert not any("longest clean segment" in w for w in auto.warnings)
+
+
+def test_auto_policy_masks_short_gaps_and_keeps_the_longest_segment_across_a_long_one() -> None:
+    """``"auto"`` (the default) masks when no gap exceeds AUTO_MAX_GAP_S (5 s = 500 frames at
+    100 Hz here) and analyses the longest segment, saying why, across a longer one."""
+
+    def gap(frames):
+        def fn(a):
+            a[400:] += frames * (10_000_000 if a.max() > 1e6 else 1)
+
+        return fn
+
+    n = 20_000
+    short = condition(recording(n, stamp_ns=gap(500), counter=gap(500)))  # 500 missing
+    assert short.excluded is not None and int(short.excluded.sum()) == 500
+    long = condition(recording(n, stamp_ns=gap(501), counter=gap(501)))  # 501 missing
+    assert long.excluded is None and long.rows == slice(400, n)
+    assert any("a gap of 5.01 s, longer than the 5 s" in w for w in long.warnings)
+    assert any("longest clean segment" in w for w in long.warnings)
 
 
 def test_hour_long_gap_in_time_only() -> None:
@@ -101,7 +124,7 @@ def test_nonfinite_and_saturated_rows_are_cut_out() -> None:
         a[800] = True
 
     rec = recording(gyro_y=nan, saturated=sat)
-    s = condition(rec)
+    s = condition(rec, gaps="longest")
     assert s.counts["nonfinite_frames"] == 2
     assert s.counts["saturated_frames"] == 1
     assert [seg.frames for seg in s.segments] == [200, 598, 199]

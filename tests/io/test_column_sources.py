@@ -111,8 +111,9 @@ def test_tmp_dir_must_exist_and_have_room(tmp_path: Path, monkeypatch, small_rec
         small_recordings.run(path, tmp_path / "out", 0, tmp_dir=tmp_path)
     # in memory, no temporary disk is needed
     report, _ = small_recordings.run(path, tmp_path / "out", 10**12, tmp_dir=tmp_path)
-    # frames analysed: the longest run, after the NaN at N/2 (5-frame gap at N/4 before it)
-    assert report["input"]["frames"] == small_recordings.frames // 2 - 1
+    # frames analysed: all but the NaN at N/2 (the default masks it and the 5 missing frames
+    # at N/4)
+    assert report["input"]["frames"] == small_recordings.frames - 1
 
 
 def test_cli_tmp_dir_option(tmp_path: Path, monkeypatch, small_recordings, cli) -> None:
