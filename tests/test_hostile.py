@@ -632,7 +632,7 @@ def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, cli) -> N
     assert code == 0, err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["input"]["rate_hz"] == pytest.approx(200.0, rel=1e-9)
-    assert fast - 256 <= report["input"]["frames"] <= fast
+    assert report["input"]["frames"] == fast  # the switch found to the row, not the block
     assert any(
         w.startswith("the sample rate changes 1 time(s) (200 Hz from frame 0, 100 Hz from frame")
         for w in report["input"]["warnings"]

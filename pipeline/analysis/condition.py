@@ -283,10 +283,22 @@ def rate_regimes(t: np.ndarray) -> list[tuple[int, int, float]]:
     lasting[:-1] &= ~jump[1:]  # the next block stays at the new rate (not a one-block spike)
     lasting[-1] = False
     blocks = [0, *(np.flatnonzero(lasting) + 1).tolist(), len(medians)]
-    return [
-        (a * RATE_BLOCK, b * RATE_BLOCK if b < len(medians) else len(t), float(np.median(m)))
-        for a, b, m in ((a, b, medians[a:b]) for a, b in itertools.pairwise(blocks))
-    ]
+    steps = [float(np.median(medians[a:b])) for a, b in itertools.pairwise(blocks)]
+    switches = zip(blocks[1:-1], steps[:-1], strict=True)
+    rows = [0, *(_switch_row(t, k, step) for k, step in switches), len(t)]
+    return [(a, b, step) for (a, b), step in zip(itertools.pairwise(rows), steps, strict=True)]
+
+
+def _switch_row(t: np.ndarray, block: int, step: float) -> int:
+    """The first row of the new rate at the switch found before ``block``: the row after the
+    last one, in the two blocks around it, that follows its predecessor by about the old
+    ``step`` (s).  (Block-aligned, up to a block of the new rate's rows stayed in the old part,
+    where the gap policy "auto" masked them as missing frames of the old rate.)"""
+    lo, hi = (block - 1) * RATE_BLOCK, min((block + 1) * RATE_BLOCK, len(t) - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        old = np.abs(np.log(np.diff(t[lo : hi + 1]) / step)) <= np.log1p(RATE_CHANGE)
+    last = np.flatnonzero(old)
+    return lo + int(last[-1]) + 2 if last.size else block * RATE_BLOCK
 
 
 def _breaks(
