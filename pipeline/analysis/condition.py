@@ -39,6 +39,7 @@ import numpy as np
 from imupipe.errors import ImupipeError
 from imupipe.io.decode import ImuRecording
 from imupipe.stats import robust
+from imupipe.stats.allan import clean_runs
 from imupipe.vocab import AXES
 
 GAP_FACTOR = 1.5
@@ -138,13 +139,6 @@ class ConditionedSeries:
         return out
 
 
-def runs(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(starts, stops) of the runs of True in the bool array ``flags``: run k is
-    ``flags[starts[k]:stops[k]]``."""
-    edges = np.diff(flags.view(np.int8), prepend=np.int8(0), append=np.int8(0))
-    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-
-
 FILL_SPAN_S = 0.5
 """Span either side of a run of excluded samples whose mean its fill starts and ends at (s)."""
 _FILL_RUNS = 1 << 14
@@ -161,8 +155,8 @@ def fill_runs(y: np.ndarray, holes: np.ndarray, span: int) -> None:
     shift of σ√(block) in any block mean — on every axis at once, a disturbance event at
     every gap.  The fill carries no noise; it is what the time-domain steps read where there
     is no data (the Allan variance never reads it)."""
-    starts, stops = runs(holes)
     usable = ~holes
+    starts, stops = clean_runs(usable).T  # the runs of holes
     offsets = np.arange(span)
     sides = []
     for k in range(0, len(starts), _FILL_RUNS):
@@ -403,8 +397,7 @@ def _mask_warning(series_samples: int, excluded: int, n: int) -> str:
 
 def _longest_run(flags: np.ndarray) -> int:
     """Length of the longest run of True in ``flags``."""
-    starts, stops = runs(flags)
-    return int(np.max(stops - starts, initial=0))
+    return int(np.max(np.diff(clean_runs(~flags), axis=1), initial=0))
 
 
 def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
@@ -456,13 +449,9 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
     # Segment boundaries: a break between rows, and bad rows removed entirely.
     edges = np.flatnonzero(breaks)
     segments: list[Segment] = []
-    good = ~bad_row
     for a, b in itertools.pairwise(edges):
-        # split [a, b) further around bad rows: runs of good rows start and stop where the
-        # padded mask changes (two small index arrays, not one index per row)
-        padded = np.concatenate(([False], good[a:b], [False]))
-        change = np.flatnonzero(padded[1:] != padded[:-1]) + a
-        for start, stop in change.reshape(-1, 2).tolist():
+        # split [a, b) further around bad rows: the runs of good rows
+        for start, stop in (clean_runs(bad_row[a:b]) + a).tolist():
             segments.append(
                 Segment(start + offset, stop + offset, float(t[start]), float(t[stop - 1]))
             )
