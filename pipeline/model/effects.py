@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 import numba
 import numpy as np
 import scipy.fft
-from scipy import special
+from scipy import linalg, special
 
 from imupipe.jit import kernel_input
 from imupipe.stats import robust
@@ -207,9 +207,20 @@ class Whitener:
     ``inv_chol`` turns x_t into its standardised one-step prediction error given x_0..x_{t−1},
     i.e. L⁻¹ with L the Cholesky factor) — exact, so the start and end of the record need no
     circular (Whittle) approximation, which fails at the edges for long-memory noise.
+
+    ``excluded`` (bool, one per block of ``dt``: masked samples, gap policy "mask") leaves out
+    every coarse block holding an excluded block: the differences are then taken between
+    consecutive *observed* coarse blocks o_i, each the sum of the coarse differences from o_i
+    to o_{i+1}, so their covariance is A Γ Aᵀ (Γ the Toeplitz covariance above, A the 0/1
+    summing matrix) — the exact Gaussian likelihood of the observed block means (missing data
+    marginalised out), whitened by the inverse of its Cholesky factor.  The level across a gap
+    still counts (its variance grows with the gap's length under a random walk); the fill of a
+    gap, a noise-free line, is never read as data.
     """
 
-    def __init__(self, psd: NoisePsd, n: int, dt: float) -> None:
+    def __init__(
+        self, psd: NoisePsd, n: int, dt: float, excluded: np.ndarray | None = None
+    ) -> None:
         self.factor = max(1, -(-n // MAX_GLS_POINTS))
         self.span = self.factor * dt
         m = n // self.factor - 1  # differences
@@ -226,9 +237,16 @@ class Whitener:
         # under a strong line's hump) has a band-limited spectrum whose Toeplitz covariance is
         # singular to rounding; its innovations' variances went negative (NaN errors)
         gamma[0] *= 1.0 + NUGGET
-        self.inv_chol = _innovations(gamma)
+        self.blocks = observed_blocks(excluded, m + 1, self.factor)
+        """Index of each coarse block the differences read (all of them without exclusions)."""
+        if len(self.blocks) == m + 1:
+            self.inv_chol = _innovations(gamma)
+        else:
+            cov = _summed_covariance(gamma, self.blocks)
+            chol = linalg.cholesky(cov, lower=True)
+            self.inv_chol = linalg.solve_triangular(chol, np.eye(len(cov)), lower=True)
         # whitened constant difference: a linear rate ramp, the model's R term (nuisance)
-        self.drift = self.inv_chol @ np.ones(m)
+        self.drift = self.inv_chol @ np.diff(self.blocks).astype(float)
 
     def coarse(self, v: np.ndarray) -> np.ndarray:
         """Coarse block means of ``v`` (n,) or (n, k) (an incomplete last block is dropped)."""
@@ -236,8 +254,41 @@ class Whitener:
         return v[: n * self.factor].reshape(n, self.factor, *v.shape[1:]).mean(axis=1)
 
     def __call__(self, v: np.ndarray) -> np.ndarray:
-        """Whitened differences of the coarse block means of ``v``."""
-        return self.inv_chol @ np.diff(self.coarse(v), axis=0)
+        """Whitened differences of the observed coarse block means of ``v``."""
+        return self.inv_chol @ np.diff(self.coarse(v)[self.blocks], axis=0)
+
+
+MIN_OBSERVED_BLOCKS = 16
+"""Fewest observed coarse blocks the GLS reads; with fewer, the mask is too dense to leave out
+whole blocks and :func:`observed_blocks` keeps every block (the gaps' fill read as data)."""
+
+
+def observed_blocks(excluded: np.ndarray | None, n_coarse: int, factor: int) -> np.ndarray:
+    """Indices of the ``n_coarse`` coarse blocks of ``factor`` blocks that hold no ``excluded``
+    block (all of them without exclusions, or when fewer than :data:`MIN_OBSERVED_BLOCKS` would
+    remain)."""
+    every = np.arange(n_coarse)
+    if excluded is None:
+        return every
+    hit = np.asarray(excluded[: n_coarse * factor], bool).reshape(n_coarse, factor).any(axis=1)
+    kept = np.flatnonzero(~hit)
+    return kept if len(kept) >= MIN_OBSERVED_BLOCKS else every
+
+
+def _summed_covariance(gamma: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+    """Covariance of the differences between consecutive ``blocks`` (coarse indices): entry
+    (i, j) is the sum of Γ over differences [bᵢ, bᵢ₊₁) × [bⱼ, bⱼ₊₁), Γ = Toeplitz(``gamma``),
+    read from Γ's two-dimensional cumulative sums."""
+    m = len(gamma)
+    total = np.zeros((m + 1, m + 1))
+    total[1:, 1:] = linalg.toeplitz(gamma).cumsum(axis=0).cumsum(axis=1)
+    lo, hi = blocks[:-1], blocks[1:]
+    return (
+        total[np.ix_(hi, hi)]
+        - total[np.ix_(lo, hi)]
+        - total[np.ix_(hi, lo)]
+        + total[np.ix_(lo, lo)]
+    )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -486,7 +537,9 @@ def step_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
     Change points in 5–95 % of the record; time interval: change points with
     χ²_max − χ²(k) ≤ χ²₁(0.95), widened by one coarse block each side (a step inside coarse block
     k + 1 is seen partly by differences k and k + 1, so the grid resolves it to ±1 block);
-    p-value Bonferroni-adjusted for the change points searched.
+    p-value Bonferroni-adjusted for the change points searched.  Across a gap (``whiten.blocks``
+    skips coarse blocks) difference k spans the gap: a step there is placed at the first
+    observed block after it and its interval covers the whole gap.
     """
     yw = whiten(y_d)
     m = len(yw)
@@ -499,12 +552,12 @@ def step_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
     inner = (k >= 0.05 * m) & (k <= 0.95 * m)
     kb = int(k[inner][np.argmax(prof[inner])])
     ok = k[inner & (prof[kb] - prof <= CHI2_95)]
-    span = whiten.span
-    step = (np.arange(len(y_d)) >= (kb + 1) * whiten.factor).astype(float)
+    span, blocks = whiten.span, whiten.blocks
+    step = (np.arange(len(y_d)) >= blocks[kb + 1] * whiten.factor).astype(float)
     cand = Candidate(
         "bias_step",
-        {"time_s": (kb + 1) * span},
-        {"time_s": [float(ok.min() * span), float((ok.max() + 2) * span)]},
+        {"time_s": float(blocks[kb + 1] * span)},
+        {"time_s": [float(blocks[ok.min()] * span), float((blocks[ok.max() + 1] + 1) * span)]},
         regressors=step[:, None],
         names=("size",),
         n_options=int(inner.sum()),

@@ -375,6 +375,14 @@ class _Axis:
         self.block = block_size(len(sig.y), sig.tau0)
         self.dt = self.block * sig.tau0
         self.y_d = effects.block_means(sig.y, self.block)
+        self.excluded_d = (
+            None
+            if sig.excluded is None
+            else sig.excluded[: len(self.y_d) * self.block].reshape(-1, self.block).any(axis=1)
+        )
+        """Blocks of ``y_d`` holding a masked sample: their means read a gap's fill, so the
+        time-domain tests (:class:`effects.Whitener`) and the slow corrections' Allan change
+        leave them out."""
         dec = self.tau >= self.dt
         m_d = np.round(self.tau[dec] / self.dt).astype(int)
         valid = m_d <= (len(self.y_d) - 1) // 2
@@ -411,12 +419,12 @@ class _Axis:
                 self._spike_avar = oadev(y, tau0, m, cand.spikes, excluded)[0] ** 2
             return self._spike_avar.copy()
         if state.avar_d is None:
-            state.avar_d = oadev(state.y_d, self.dt, self.m_d)[0] ** 2
-        avar_d = oadev(state.y_d - cand.correction, self.dt, self.m_d)[0] ** 2
+            state.avar_d = oadev(state.y_d, self.dt, self.m_d, excluded=self.excluded_d)[0] ** 2
+        avar_d = oadev(state.y_d - cand.correction, self.dt, self.m_d, excluded=self.excluded_d)
+        change = avar_d[0] ** 2 - state.avar_d
+        change[~np.isfinite(change)] = 0.0  # no decimated term clears the gaps at this τ
         out = state.avar.copy()
-        out[self.dec_index] = np.maximum(
-            out[self.dec_index] + avar_d - state.avar_d, 1e-3 * out[self.dec_index]
-        )
+        out[self.dec_index] = np.maximum(out[self.dec_index] + change, 1e-3 * out[self.dec_index])
         return out
 
     def half_curves(self, state: _State) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -710,7 +718,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         accepted.append(chosen.accepted(good.error, new_good.error))
         fit, good = new_fit, new_good
     terms1 = terms0 if fit is fit0 else state.terms(ax)
-    time_before = time_domain_error(fit0, {}, ax.y_d, ax.dt)
+    time_before = time_domain_error(fit0, {}, ax.y_d, ax.dt, ax.excluded_d)
     return LoopResult(
         name=signals.name,
         tau_s=tau,
@@ -728,7 +736,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         time_error_after=(
             time_before
             if fit is fit0
-            else time_domain_error(fit, state.effect_parameters, state.y_d, ax.dt)
+            else time_domain_error(fit, state.effect_parameters, state.y_d, ax.dt, ax.excluded_d)
         ),
     )
 
@@ -738,10 +746,14 @@ Shapes = dict[str, tuple[str, tuple]]
 
 
 def time_domain_error(
-    fit: ieee952.CompositeFit, shapes: Shapes, y_d: np.ndarray, dt: float
+    fit: ieee952.CompositeFit,
+    shapes: Shapes,
+    y_d: np.ndarray,
+    dt: float,
+    excluded: np.ndarray | None = None,
 ) -> float:
     """:func:`time_domain_fit`'s error alone."""
-    return time_domain_fit(fit, shapes, y_d, dt)[0]
+    return time_domain_fit(fit, shapes, y_d, dt, excluded)[0]
 
 
 class TimeFit(NamedTuple):
@@ -762,9 +774,14 @@ class TimeFit(NamedTuple):
 
 
 def time_domain_fit(
-    fit: ieee952.CompositeFit, shapes: Shapes, y_d: np.ndarray, dt: float
+    fit: ieee952.CompositeFit,
+    shapes: Shapes,
+    y_d: np.ndarray,
+    dt: float,
+    excluded: np.ndarray | None = None,
 ) -> TimeFit:
-    """The time-domain error of a fitted model on the block means ``y_d`` (block ``dt`` s),
+    """The time-domain error of a fitted model on the block means ``y_d`` (block ``dt`` s;
+    the blocks marked ``excluded`` left out: :class:`effects.Whitener`),
     with its degrees of freedom m − 1 and ln det Σ (:class:`TimeFit`):
     the mean square of the whitened residual — the first differences of the coarse block means
     (:class:`effects.Whitener`, ≤ 1024 blocks) turned into standardised one-step prediction
@@ -775,7 +792,7 @@ def time_domain_fit(
     Σ e² / (m − 1 − 2 sinusoids).  ≈ 1 (χ²/dof) when the model describes the series at
     τ ≥ the coarse block; above 1 when the series holds what the model lacks.  It sees only the
     slow part (τ ≥ T/1024; a faster line as its block means' alias)."""
-    whiten = effects.Whitener(noise_psd(fit, shapes), len(y_d), dt)
+    whiten = effects.Whitener(noise_psd(fit, shapes), len(y_d), dt, excluded)
     yw = whiten(y_d)
     t = (np.arange(len(y_d)) + 0.5) * dt  # block centres: a block mean of a line is in phase
     tones = [shape[0] for kind, shape in shapes.values() if kind == "sinusoid"]
@@ -857,7 +874,7 @@ def _ramp_whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis) -> effec
     k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
     k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: the fitted K
     upper = replace(psd, rrw=k2)
-    return effects.Whitener(upper, len(state.y_d), ax.dt)
+    return effects.Whitener(upper, len(state.y_d), ax.dt, ax.excluded_d)
 
 
 def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
@@ -868,11 +885,14 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     had soaked part of the effect into K and R: a joint fit of noise model and effect).
     """
     tau, edf, dt = ax.tau, ax.edf, ax.dt
-    whiten = effects.Whitener(noise_psd(fit, state.effect_parameters), len(state.y_d), dt)
-    time_old = time_domain_fit(fit, state.effect_parameters, state.y_d, dt)
+    excluded = ax.excluded_d
+    whiten = effects.Whitener(noise_psd(fit, state.effect_parameters), len(state.y_d), dt, excluded)
+    time_old = time_domain_fit(fit, state.effect_parameters, state.y_d, dt, excluded)
 
     def errors(fit_new: ieee952.CompositeFit, new_state: _State, kind: str) -> ErrorChange:
-        time_new = time_domain_fit(fit_new, new_state.effect_parameters, new_state.y_d, dt)
+        time_new = time_domain_fit(
+            fit_new, new_state.effect_parameters, new_state.y_d, dt, excluded
+        )
         return ErrorChange.between(
             fit,
             fit_new,
@@ -903,7 +923,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
                 _ramp_whitener(fit_new, new_state, ax)
                 if cand.kind == "ramp"
                 else effects.Whitener(
-                    noise_psd(fit_new, state.effect_parameters), len(state.y_d), dt
+                    noise_psd(fit_new, state.effect_parameters), len(state.y_d), dt, excluded
                 )
             )
             cand.refit(refined, state.y_d)

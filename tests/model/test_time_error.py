@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from imupipe.analysis.condition import fill_runs
 from imupipe.model import effects
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
 from imupipe.stats.allan import allan_curves
@@ -76,3 +77,18 @@ def test_a_spread_line_psd_holds_its_variance() -> None:
     f = np.linspace(1e-9, 50.0, 2_000_001)
     assert 2 * np.trapezoid(psd.at(f), f) == pytest.approx(2.5e-7, rel=2e-3)
     assert f[np.argmax(psd.at(f))] == pytest.approx(0.3, abs=1e-4)
+
+
+def test_time_error_leaves_out_the_fill_of_a_long_gap() -> None:
+    """A 1 h gap of a 3.6 h record (gap policy "mask"), filled as the conditioning fills it
+    (a noise-free line): read as data, the fill whitened to nothing and diluted the error to
+    0.75 (the observed fraction); left out (the masked blocks, :class:`effects.Whitener`), the
+    error is about 1 again and no effect is accepted."""
+    y = noise(4) + np.cumsum(np.random.default_rng(104).standard_normal(N)) * 2e-6
+    excluded = np.zeros(N, bool)
+    excluded[52_000:88_000] = True
+    fill_runs(y, excluded, 5)
+    curve = allan_curves(y, TAU0, excluded=excluded)[0]
+    res = close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None, excluded), curve)
+    assert res.accepted == []
+    assert 0.9 < res.time_error_before < 1.1
