@@ -10,6 +10,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+import imupipe
 from imupipe.errors import InputError
 from imupipe.io.decode import decode
 
@@ -44,7 +45,10 @@ def write_bag(
     frame_ids: tuple[str, ...] = ("imu_link",),
     temperature: bool = True,
     log_offset_ns: int = 0,
+    dropped: frozenset[int] = frozenset(),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A rosbag2 MCAP of ``n`` Imu frames at 100 Hz (their ``dropped`` indices not written:
+    gaps) and a 1 Hz Temperature; returns every frame's stamps, gyro and accel."""
     rng = np.random.default_rng(3)
     gyro = rng.normal(0, 0.01, (n, 3))
     accel = rng.normal(0, 0.03, (n, 3)) + np.array([0.0, 0.0, -9.81])
@@ -61,6 +65,8 @@ def write_bag(
         )
         for i in range(n):
             s = int(stamps[i])
+            if i in dropped:
+                continue
             for conn, fid in zip(conns, frame_ids, strict=True):
                 fid_i = fid if fid != "varying" else "f" * (i % 5)
                 raw = TS.serialize_cdr(imu_msg(i, s, gyro[i], accel[i], fid_i), conn.msgtype)
@@ -127,3 +133,24 @@ def test_log_time_used_when_header_stamps_are_unset(tmp_path: Path) -> None:
     assert rec.time_source == "log_time"
     assert any("header.stamp is unset" in w for w in rec.warnings)
     np.testing.assert_allclose(np.diff(rec.frames["t_s"].to_numpy()), 0.005)
+
+
+def test_gaps_in_a_rosbags_bag_are_masked_not_cut(tmp_path: Path) -> None:
+    """Messages lost from a bag another library wrote (one frame, then 1.5 s): the default gap
+    policy analyses the whole recording on its 100 Hz grid with the lost places masked, and the
+    Allan variance loses exactly the terms that touch them (a run of r masked samples costs
+    r + 2m − 1 terms at factor m)."""
+    n, lost = 12_000, frozenset({1000, *range(5000, 5150)})
+    bag = tmp_path / "gapped"
+    write_bag(bag, n, temperature=False, dropped=lost)
+    result = imupipe.analyze(bag, tmp_path / "out", rrd=False, figures=False, loop=False)
+    report = result.to_dict()
+    warnings = " ".join(report["input"]["warnings"])
+    assert "2 gap(s) in time or frame counter (151 frames missing)" in warnings
+    assert f"uniform grid of {n} samples with 151 masked" in warnings
+    assert "longest clean segment" not in warnings
+    assert report["input"]["frames"] == n - 151
+    allan = report["axes"]["accel_z"]["allan"]
+    tau0 = allan["tau_s"][0]
+    assert tau0 == pytest.approx(0.01)
+    assert allan["n_terms"][0] == (n - 1) - 2 - 151  # m = 1
