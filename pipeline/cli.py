@@ -225,7 +225,7 @@ def analyze(
     gaps: Annotated[
         GapPolicy,
         typer.Option(
-            help="auto: mask if no gap is longer than 5 s, else longest; longest: analyse "
+            help="auto: mask if no gap is longer than 1 h, else longest; longest: analyse "
             "the longest clean segment; fail: refuse; mask: analyse the whole recording, "
             "skipping the Allan terms that touch a gap or bad frame."
         ),

@@ -863,18 +863,25 @@ def noise_psd(fit: ieee952.CompositeFit, shapes: Shapes) -> effects.NoisePsd:
     )
 
 
-def _ramp_whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis) -> effects.Whitener:
-    """The whitener of the ramp test: the fitted PSD with the rate random walk at the upper
-    end of its :data:`RAMP_K_LEVEL` profile interval.  A random walk's wander over the record
-    looks like a trend; with K underestimated (unresolved, or soaked into B) the GLS would read
-    that wander as a ramp — measured: false ramps on clean axes of the independent generator,
-    whose axes all carry K.  At 95 % the bound hid a 12 B ramp (which inflates K's bound)."""
+def _whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis, kind: str) -> effects.Whitener:
+    """The GLS whitener of a time-domain candidate of ``kind``: the fitted PSD, or, for the
+    ramp test and for every candidate on a record with masked samples, the fitted PSD with the
+    rate random walk at the upper end of its :data:`RAMP_K_LEVEL` profile interval.
+
+    A random walk's wander over the record looks like a trend or a step; with K underestimated
+    (unresolved, or soaked into B) the GLS would read that wander as one — measured: false
+    ramps on clean axes of the independent generator, whose axes all carry K (at 95 % the bound
+    hid a 12 B ramp, which inflates K's bound).  On a masked record the Allan curve stops at
+    half the longest clean run (ten 30 s gaps in 4 h: τ ≤ 1585 s instead of 6310 s), so K is
+    loosely bounded there while the GLS spans the whole record: a false bias step (Wald χ² 50,
+    the true K's whitener gives 9) on one of 48 clean axes before this rule."""
     psd = noise_psd(fit, state.effect_parameters)
+    if kind != "ramp" and ax.excluded_d is None:
+        return effects.Whitener(psd, len(state.y_d), ax.dt)
     j = fit.names.index("rate_random_walk")
     k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
     k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: the fitted K
-    upper = replace(psd, rrw=k2)
-    return effects.Whitener(upper, len(state.y_d), ax.dt, ax.excluded_d)
+    return effects.Whitener(replace(psd, rrw=k2), len(state.y_d), ax.dt, ax.excluded_d)
 
 
 def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
@@ -886,7 +893,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     """
     tau, edf, dt = ax.tau, ax.edf, ax.dt
     excluded = ax.excluded_d
-    whiten = effects.Whitener(noise_psd(fit, state.effect_parameters), len(state.y_d), dt, excluded)
+    whiten = _whitener(fit, state, ax, "")
     time_old = time_domain_fit(fit, state.effect_parameters, state.y_d, dt, excluded)
 
     def errors(fit_new: ieee952.CompositeFit, new_state: _State, kind: str) -> ErrorChange:
@@ -908,7 +915,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         effects.coupling_candidate("supply", state.y_d, ax.sig.supply_d, dt, "V", whiten),
         effects.step_candidate(state.y_d, dt, whiten),
         effects.warmup_candidate(state.y_d, dt, whiten),
-        effects.ramp_candidate(state.y_d, dt, _ramp_whitener(fit, state, ax)),
+        effects.ramp_candidate(state.y_d, dt, _whitener(fit, state, ax, "ramp")),
         # spikes: one candidate, from the raw series' robust statistics (found once, whole)
         ax.spike_candidate() if state.spikes is None else None,
     ]
@@ -919,13 +926,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         fit_new = new_state.fit(ax)
         hold = {"holds": True, "note": "spikes are local; no hold-out split"}
         if cand.regressors is not None:
-            refined = (
-                _ramp_whitener(fit_new, new_state, ax)
-                if cand.kind == "ramp"
-                else effects.Whitener(
-                    noise_psd(fit_new, state.effect_parameters), len(state.y_d), dt, excluded
-                )
-            )
+            refined = _whitener(fit_new, new_state, ax, cand.kind)
             cand.refit(refined, state.y_d)
             new_state = _corrected_state(ax, state, cand)
             fit_new = new_state.fit(ax)

@@ -76,22 +76,22 @@ def test_one_missing_frame_splits_and_longest_is_chosen() -> None:
     assert not any("longest clean segment" in w for w in auto.warnings)
 
 
-def test_auto_policy_masks_short_gaps_and_keeps_the_longest_segment_across_a_long_one() -> None:
-    """``"auto"`` (the default) masks when no gap exceeds AUTO_MAX_GAP_S (5 s = 500 frames at
-    100 Hz here) and analyses the longest segment, saying why, across a longer one."""
+def test_auto_policy_masks_gaps_up_to_an_hour_and_the_longest_segment_beyond() -> None:
+    """``"auto"`` (the default) masks when no gap exceeds AUTO_MAX_GAP_S (1 h = 3600 frames at
+    1 Hz here) and analyses the longest segment, saying why, across a longer one."""
 
     def gap(frames):
         def fn(a):
-            a[400:] += frames * (10_000_000 if a.max() > 1e6 else 1)
+            a[4000:] += frames * (10**9 if a.max() > 1e6 else 1)
 
         return fn
 
-    n = 20_000
-    short = condition(recording(n, stamp_ns=gap(500), counter=gap(500)))  # 500 missing
-    assert short.excluded is not None and int(short.excluded.sum()) == 500
-    long = condition(recording(n, stamp_ns=gap(501), counter=gap(501)))  # 501 missing
-    assert long.excluded is None and long.rows == slice(400, n)
-    assert any("a gap of 5.01 s, longer than the 5 s" in w for w in long.warnings)
+    n = 10_000
+    short = condition(recording(n, rate=1.0, stamp_ns=gap(3600), counter=gap(3600)))
+    assert short.excluded is not None and int(short.excluded.sum()) == 3600
+    long = condition(recording(n, rate=1.0, stamp_ns=gap(3601), counter=gap(3601)))
+    assert long.excluded is None and long.rows == slice(4000, n)
+    assert any("a gap of 3601 s, longer than the 3600 s" in w for w in long.warnings)
     assert any("longest clean segment" in w for w in long.warnings)
 
 
