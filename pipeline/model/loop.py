@@ -864,24 +864,25 @@ def noise_psd(fit: ieee952.CompositeFit, shapes: Shapes) -> effects.NoisePsd:
 
 
 def _whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis, kind: str) -> effects.Whitener:
-    """The GLS whitener of a time-domain candidate of ``kind``: the fitted PSD, or, for the
-    ramp test and for every candidate on a record with masked samples, the fitted PSD with the
-    rate random walk at the upper end of its :data:`RAMP_K_LEVEL` profile interval.
+    """The GLS whitener of a time-domain candidate of ``kind`` (masked blocks left out): the
+    fitted PSD, or, for the ramp test, the fitted PSD with the rate random walk at the upper end
+    of its :data:`RAMP_K_LEVEL` profile interval.
 
-    A random walk's wander over the record looks like a trend or a step; with K underestimated
-    (unresolved, or soaked into B) the GLS would read that wander as one — measured: false
-    ramps on clean axes of the independent generator, whose axes all carry K (at 95 % the bound
-    hid a 12 B ramp, which inflates K's bound).  On a masked record the Allan curve stops at
-    half the longest clean run (ten 30 s gaps in 4 h: τ ≤ 1585 s instead of 6310 s), so K is
-    loosely bounded there while the GLS spans the whole record: a false bias step (Wald χ² 50,
-    the true K's whitener gives 9) on one of 48 clean axes before this rule."""
+    A random walk's wander over the record looks like a trend; with K underestimated
+    (unresolved, or soaked into B) the GLS would read that wander as a ramp — measured: false
+    ramps on clean axes of the independent generator, whose axes all carry K.  At 95 % the
+    bound hid a 12 B ramp (which inflates K's bound).  The same bound for every candidate of a
+    masked record (whose Allan curve stops at half the longest clean run, so K is loosely
+    bounded while the GLS spans the record) removed a false step but hid 2 of 4 bias steps of
+    10× the noise behind ten 30 s gaps (a step raises the long-τ curve, and so K's bound): not
+    done (docs/gaps_and_outliers.md)."""
     psd = noise_psd(fit, state.effect_parameters)
-    if kind != "ramp" and ax.excluded_d is None:
-        return effects.Whitener(psd, len(state.y_d), ax.dt)
-    j = fit.names.index("rate_random_walk")
-    k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
-    k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: the fitted K
-    return effects.Whitener(replace(psd, rrw=k2), len(state.y_d), ax.dt, ax.excluded_d)
+    if kind == "ramp":
+        j = fit.names.index("rate_random_walk")
+        k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
+        k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: fitted K
+        psd = replace(psd, rrw=k2)
+    return effects.Whitener(psd, len(state.y_d), ax.dt, ax.excluded_d)
 
 
 def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
