@@ -55,10 +55,10 @@ AUTO_MAX_GAP_S = 3600.0
 """Policy ``"auto"``: the longest gap (run of excluded grid samples, s) it masks; a longer one
 makes it analyse the longest clean segment.  Measured on independent-generator recordings of
 4 h at 100 Hz, clean, 8 seeds each (docs/gaps_and_outliers.md): with the whole recording
-masked, no false effect with 20 gaps of up to 5 s, ten of 30 s, three of 2 min, one of 10 min
-or one of 1 h, since the loop's time-domain tests leave the masked blocks out
-(:class:`imupipe.model.effects.Whitener`; before that, a 1 h gap's fill made false steps or
-warm-ups on 4 of 8).  Longer gaps were not measured."""
+masked, no false effect with 20 gaps of up to 5 s, three of 2 min, one of 10 min or one of
+1 h, and one false bias step with ten of 30 s (of 8 recordings), since the loop's time-domain
+tests leave the masked blocks out (:class:`imupipe.model.effects.Whitener`; before that, a 1 h
+gap's fill made false steps or warm-ups on 4 of 8).  Longer gaps were not measured."""
 
 GapPolicy = Literal["auto", "longest", "fail", "mask"]
 
