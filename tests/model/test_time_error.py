@@ -11,7 +11,7 @@ import pytest
 
 from imupipe.analysis.condition import fill_runs
 from imupipe.model import effects
-from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
+from imupipe.model.loop import AxisSignals, _Axis, _State, aux_block_means, close_loop
 from imupipe.stats.allan import allan_curves
 
 TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
@@ -92,3 +92,23 @@ def test_time_error_leaves_out_the_fill_of_a_long_gap() -> None:
     res = close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None, excluded), curve)
     assert res.accepted == []
     assert 0.9 < res.time_error_before < 1.1
+
+
+def test_a_correction_inside_a_gap_leaves_the_allan_curve_unchanged() -> None:
+    """The loop's Allan change of a slow correction (decimated, :meth:`_Axis.corrected_avar`)
+    skips the masked blocks as the full-rate curve does: a correction that only moves a gap's
+    fill changes nothing, and the same correction on observed blocks does."""
+    y = noise(5)
+    excluded = np.zeros(N, bool)
+    excluded[52_000:88_000] = True
+    fill_runs(y, excluded, 5)
+    curve = allan_curves(y, TAU0, excluded=excluded)[0]
+    ax = _Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None, excluded), curve)
+    state = _State(ax.avar, ax.y_d.copy(), None)
+    in_gap = np.zeros(len(ax.y_d))
+    gap_blocks = np.flatnonzero(ax.excluded_d)
+    in_gap[gap_blocks[10:-10]] = 1e-3  # a level shift of the fill only (10x the noise)
+    cand = effects.Candidate("bias_step", {}, {}, correction=in_gap)
+    assert np.array_equal(ax.corrected_avar(state, cand), state.avar)
+    cand.correction = np.roll(in_gap, -len(gap_blocks))  # the same shift on observed blocks
+    assert np.max(ax.corrected_avar(state, cand) / state.avar) > 2
