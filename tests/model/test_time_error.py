@@ -92,6 +92,11 @@ def test_time_error_leaves_out_the_fill_of_a_long_gap() -> None:
     res = close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None, excluded), curve)
     assert res.accepted == []
     assert 0.9 < res.time_error_before < 1.1
+    # the candidates' GLS leaves the fill out too: the whitened residual variance of the step,
+    # warm-up and ramp tests is about 1 (read as data: 0.92, 0.80, 0.76)
+    dispersion = {c.kind: c.evidence.get("whitened_dispersion") for c in res.rejected}
+    for kind in ("bias_step", "rate_ramp", "ramp"):
+        assert 0.95 < dispersion[kind] < 1.05, kind
 
 
 def test_a_correction_inside_a_gap_leaves_the_allan_curve_unchanged() -> None:
