@@ -375,14 +375,16 @@ class _Axis:
         self.block = block_size(len(sig.y), sig.tau0)
         self.dt = self.block * sig.tau0
         self.y_d = effects.block_means(sig.y, self.block)
-        self.excluded_d = (
+        self.masked_d = (
             None
             if sig.excluded is None
-            else sig.excluded[: len(self.y_d) * self.block].reshape(-1, self.block).any(axis=1)
+            else sig.excluded[: len(self.y_d) * self.block].reshape(-1, self.block).mean(axis=1)
         )
-        """Blocks of ``y_d`` holding a masked sample: their means read a gap's fill, so the
-        time-domain tests (:class:`effects.Whitener`) and the slow corrections' Allan change
-        leave them out."""
+        """Masked fraction of each block of ``y_d``: the means of blocks holding a masked
+        sample read a gap's fill, so the slow corrections' Allan change leaves them out, and
+        so do the time-domain tests where the fill is more than a trace of a coarse block
+        (:class:`effects.Whitener`)."""
+        self.excluded_d = None if self.masked_d is None else self.masked_d > 0
         dec = self.tau >= self.dt
         m_d = np.round(self.tau[dec] / self.dt).astype(int)
         valid = m_d <= (len(self.y_d) - 1) // 2
@@ -718,7 +720,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         accepted.append(chosen.accepted(good.error, new_good.error))
         fit, good = new_fit, new_good
     terms1 = terms0 if fit is fit0 else state.terms(ax)
-    time_before = time_domain_error(fit0, {}, ax.y_d, ax.dt, ax.excluded_d)
+    time_before = time_domain_error(fit0, {}, ax.y_d, ax.dt, ax.masked_d)
     return LoopResult(
         name=signals.name,
         tau_s=tau,
@@ -736,7 +738,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         time_error_after=(
             time_before
             if fit is fit0
-            else time_domain_error(fit, state.effect_parameters, state.y_d, ax.dt, ax.excluded_d)
+            else time_domain_error(fit, state.effect_parameters, state.y_d, ax.dt, ax.masked_d)
         ),
     )
 
@@ -882,7 +884,7 @@ def _whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis, kind: str) ->
         k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
         k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: fitted K
         psd = replace(psd, rrw=k2)
-    return effects.Whitener(psd, len(state.y_d), ax.dt, ax.excluded_d)
+    return effects.Whitener(psd, len(state.y_d), ax.dt, ax.masked_d)
 
 
 def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
@@ -893,7 +895,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     had soaked part of the effect into K and R: a joint fit of noise model and effect).
     """
     tau, edf, dt = ax.tau, ax.edf, ax.dt
-    excluded = ax.excluded_d
+    excluded = ax.masked_d
     whiten = _whitener(fit, state, ax, "")
     time_old = time_domain_fit(fit, state.effect_parameters, state.y_d, dt, excluded)
 

@@ -111,3 +111,15 @@ def test_a_step_across_a_gap_is_found_where_the_data_resume():
     assert step.params["time_s"] == 750.0
     assert step.intervals["time_s"] == [597.0, 754.5]
     assert step.params["size"] == pytest.approx(1.0, abs=0.05)
+
+
+def test_a_trace_of_fill_keeps_the_block_and_the_levinson_whitener():
+    """A lost message fills a trace of a coarse block: up to 1 % of it, the block is read
+    (and the whitener is the gap-free one, bit for bit); beyond, it is left out."""
+    psd = effects.NoisePsd(N2, 0.0, np.inf, K2)
+    trace = np.zeros(N_D)
+    trace[1500] = 0.03  # 3 % of one 0.5 s block: 1 % of its 1.5 s coarse block
+    kept = effects.Whitener(psd, N_D, DT, trace)
+    assert np.array_equal(kept.inv_chol, effects.Whitener(psd, N_D, DT).inv_chol)
+    trace[1501] = 0.001  # a little more: the coarse block (500) is left out
+    assert 500 not in effects.Whitener(psd, N_D, DT, trace).blocks
