@@ -49,7 +49,7 @@ import numpy as np
 from scipy import optimize, special
 
 from imupipe.analysis.condition import fill_runs
-from imupipe.model.effects import Candidate
+from imupipe.model.effects import Candidate, block_means
 from imupipe.stats import robust
 
 FINE_BLOCK_S = 0.5
@@ -535,7 +535,7 @@ def detect(
     blocks = None
     if excluded is not None and np.any(excluded):
         n_blocks = len(next(iter(means.values())))
-        blocks = np.flatnonzero(~excluded[: n_blocks * b].reshape(n_blocks, b).any(axis=1))
+        blocks = np.flatnonzero(block_means(excluded[: n_blocks * b], b) == 0)
         means = {a: m[blocks] for a, m in means.items()}
     events, detector = find_events(means, b * tau0, b, n_samples, units, blocks=blocks)
     return EventsFound(detector, tuple(events), tau0, t0_stamp_s)

@@ -208,7 +208,7 @@ class Whitener:
     i.e. L⁻¹ with L the Cholesky factor) — exact, so the start and end of the record need no
     circular (Whittle) approximation, which fails at the edges for long-memory noise.
 
-    ``excluded`` (the masked fraction of each block of ``dt``, or bool: gaps and excised
+    ``masked`` (the masked fraction of each block of ``dt``, or bool: gaps and excised
     events) leaves out every coarse block whose masked fraction exceeds
     :data:`MAX_FILLED_FRACTION`: the differences are then taken between
     consecutive *observed* coarse blocks o_i, each the sum of the coarse differences from o_i
@@ -219,9 +219,7 @@ class Whitener:
     gap, a noise-free line, is never read as data.
     """
 
-    def __init__(
-        self, psd: NoisePsd, n: int, dt: float, excluded: np.ndarray | None = None
-    ) -> None:
+    def __init__(self, psd: NoisePsd, n: int, dt: float, masked: np.ndarray | None = None) -> None:
         self.factor = max(1, -(-n // MAX_GLS_POINTS))
         self.span = self.factor * dt
         m = n // self.factor - 1  # differences
@@ -238,7 +236,7 @@ class Whitener:
         # under a strong line's hump) has a band-limited spectrum whose Toeplitz covariance is
         # singular to rounding; its innovations' variances went negative (NaN errors)
         gamma[0] *= 1.0 + NUGGET
-        self.blocks = observed_blocks(excluded, m + 1, self.factor)
+        self.blocks = observed_blocks(masked, m + 1, self.factor)
         """Index of each coarse block the differences read (all of them without exclusions)."""
         if len(self.blocks) == m + 1:
             self.inv_chol = _innovations(gamma)
@@ -270,15 +268,15 @@ MIN_OBSERVED_BLOCKS = 16
 whole blocks and :func:`observed_blocks` keeps every block (the gaps' fill read as data)."""
 
 
-def observed_blocks(excluded: np.ndarray | None, n_coarse: int, factor: int) -> np.ndarray:
-    """Indices of the ``n_coarse`` coarse blocks of ``factor`` blocks whose ``excluded``
-    fraction is at most :data:`MAX_FILLED_FRACTION` (all of them without exclusions, or when
+def observed_blocks(masked: np.ndarray | None, n_coarse: int, factor: int) -> np.ndarray:
+    """Indices of the ``n_coarse`` coarse blocks of ``factor`` blocks whose ``masked``
+    fraction is at most :data:`MAX_FILLED_FRACTION` (all of them without a mask, or when
     fewer than :data:`MIN_OBSERVED_BLOCKS` would remain)."""
     every = np.arange(n_coarse)
-    if excluded is None:
+    if masked is None:
         return every
-    filled = np.asarray(excluded[: n_coarse * factor], float).reshape(n_coarse, factor)
-    kept = np.flatnonzero(filled.mean(axis=1) <= MAX_FILLED_FRACTION)
+    filled = block_means(np.asarray(masked[: n_coarse * factor], float), factor)
+    kept = np.flatnonzero(filled <= MAX_FILLED_FRACTION)
     return kept if len(kept) >= MIN_OBSERVED_BLOCKS else every
 
 

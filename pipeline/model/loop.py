@@ -376,9 +376,7 @@ class _Axis:
         self.dt = self.block * sig.tau0
         self.y_d = effects.block_means(sig.y, self.block)
         self.masked_d = (
-            None
-            if sig.excluded is None
-            else sig.excluded[: len(self.y_d) * self.block].reshape(-1, self.block).mean(axis=1)
+            None if sig.excluded is None else effects.block_means(sig.excluded, self.block)
         )
         """Masked fraction of each block of ``y_d``: the means of blocks holding a masked
         sample read a gap's fill, so the slow corrections' Allan change leaves them out, and
@@ -752,10 +750,10 @@ def time_domain_error(
     shapes: Shapes,
     y_d: np.ndarray,
     dt: float,
-    excluded: np.ndarray | None = None,
+    masked: np.ndarray | None = None,
 ) -> float:
     """:func:`time_domain_fit`'s error alone."""
-    return time_domain_fit(fit, shapes, y_d, dt, excluded)[0]
+    return time_domain_fit(fit, shapes, y_d, dt, masked)[0]
 
 
 class TimeFit(NamedTuple):
@@ -780,10 +778,10 @@ def time_domain_fit(
     shapes: Shapes,
     y_d: np.ndarray,
     dt: float,
-    excluded: np.ndarray | None = None,
+    masked: np.ndarray | None = None,
 ) -> TimeFit:
     """The time-domain error of a fitted model on the block means ``y_d`` (block ``dt`` s;
-    the blocks marked ``excluded`` left out: :class:`effects.Whitener`),
+    the blocks of ``masked`` fill left out: :class:`effects.Whitener`),
     with its degrees of freedom m − 1 and ln det Σ (:class:`TimeFit`):
     the mean square of the whitened residual — the first differences of the coarse block means
     (:class:`effects.Whitener`, ≤ 1024 blocks) turned into standardised one-step prediction
@@ -794,7 +792,7 @@ def time_domain_fit(
     Σ e² / (m − 1 − 2 sinusoids).  ≈ 1 (χ²/dof) when the model describes the series at
     τ ≥ the coarse block; above 1 when the series holds what the model lacks.  It sees only the
     slow part (τ ≥ T/1024; a faster line as its block means' alias)."""
-    whiten = effects.Whitener(noise_psd(fit, shapes), len(y_d), dt, excluded)
+    whiten = effects.Whitener(noise_psd(fit, shapes), len(y_d), dt, masked)
     yw = whiten(y_d)
     t = (np.arange(len(y_d)) + 0.5) * dt  # block centres: a block mean of a line is in phase
     tones = [shape[0] for kind, shape in shapes.values() if kind == "sinusoid"]
@@ -895,14 +893,12 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     had soaked part of the effect into K and R: a joint fit of noise model and effect).
     """
     tau, edf, dt = ax.tau, ax.edf, ax.dt
-    excluded = ax.masked_d
+    masked = ax.masked_d
     whiten = _whitener(fit, state, ax, "")
-    time_old = time_domain_fit(fit, state.effect_parameters, state.y_d, dt, excluded)
+    time_old = time_domain_fit(fit, state.effect_parameters, state.y_d, dt, masked)
 
     def errors(fit_new: ieee952.CompositeFit, new_state: _State, kind: str) -> ErrorChange:
-        time_new = time_domain_fit(
-            fit_new, new_state.effect_parameters, new_state.y_d, dt, excluded
-        )
+        time_new = time_domain_fit(fit_new, new_state.effect_parameters, new_state.y_d, dt, masked)
         return ErrorChange.between(
             fit,
             fit_new,
