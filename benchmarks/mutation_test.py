@@ -64,6 +64,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/model/test_ieee952.py",
     ),
     "pipeline/analysis/condition.py": ("tests/analysis/test_condition.py",),
+    "pipeline/analysis/events.py": ("tests/analysis/test_events.py",),
     "pipeline/io/decode.py": (
         "tests/io/test_decode_contract.py",
         "tests/io/test_scale_factors.py",
@@ -92,8 +93,13 @@ TESTS: dict[str, tuple[str, ...]] = {
     ),
     # the rule tests first (fast; -x stops at the first failure); tests/model/test_loop_sim.py
     # (six 3 h axes per scenario, minutes) is left out of the per-mutant run for time
-    "pipeline/model/loop.py": ("tests/model/test_loop_rules.py", "tests/model/test_loop.py"),
+    "pipeline/model/loop.py": (
+        "tests/model/test_loop_rules.py",
+        "tests/model/test_time_error.py",
+        "tests/model/test_loop.py",
+    ),
     "pipeline/model/effects.py": (
+        "tests/model/test_whitener.py",
         "tests/model/test_loop_rules.py",
         "tests/model/test_effects_full_rate.py",
         "tests/model/test_loop.py",
@@ -215,17 +221,19 @@ def run_module(
     lines: set[int] | None = None,
     sample: int | None = None,
     seed: int = 0,
+    tests: tuple[str, ...] = (),
 ) -> Score:
     """Initialise, filter and execute one cosmic-ray session (or resume the one in ``resume``,
     re-testing its survivors); return the counts.
 
     Mutants outside ``functions`` and ``lines`` (when either is given) are skipped; ``sample``
-    keeps a random ``sample`` of the rest (``seed``), skipping the others ("not sampled")."""
+    keeps a random ``sample`` of the rest (``seed``), skipping the others ("not sampled");
+    ``tests`` replaces the module's test map."""
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import WorkerOutcome, WorkResult
 
     _check_clean(module)
-    command = _test_command(TESTS[module])
+    command = _test_command(tests or TESTS[module])
     baseline = subprocess.run(shlex.split(command), cwd=ROOT, env=env, check=False)
     if baseline.returncode != 0:
         raise SystemExit(f"{module}: the unmutated tests fail ({command}); fix them first")
@@ -360,6 +368,12 @@ def main() -> None:
         help="resume the session directory printed by an earlier run of ONE module, re-testing "
         "its survivors (after adding tests)",
     )
+    parser.add_argument(
+        "--tests",
+        default="",
+        help="comma-separated test files run against each mutant instead of the module's map "
+        "(a targeted run of a few functions)",
+    )
     parser.add_argument("--list", action="store_true", help="print the module -> tests map")
     args = parser.parse_args()
     if args.list or not args.modules:
@@ -386,6 +400,7 @@ def main() -> None:
             _parse_lines(args.lines),
             args.sample,
             args.seed,
+            tuple(t for t in args.tests.split(",") if t),
         )
         for m in args.modules
     ]
