@@ -220,7 +220,7 @@ class Whitener:
     """
 
     def __init__(self, psd: NoisePsd, n: int, dt: float, masked: np.ndarray | None = None) -> None:
-        self.factor = max(1, -(-n // MAX_GLS_POINTS))
+        self.factor = -(-n // MAX_GLS_POINTS)  # ceil: n ≥ 1 block
         self.span = self.factor * dt
         m = n // self.factor - 1  # differences
         grid = 16 * m
@@ -269,13 +269,13 @@ whole blocks and :func:`observed_blocks` keeps every block (the gaps' fill read 
 
 
 def observed_blocks(masked: np.ndarray | None, n_coarse: int, factor: int) -> np.ndarray:
-    """Indices of the ``n_coarse`` coarse blocks of ``factor`` blocks whose ``masked``
-    fraction is at most :data:`MAX_FILLED_FRACTION` (all of them without a mask, or when
-    fewer than :data:`MIN_OBSERVED_BLOCKS` would remain)."""
+    """Indices of the ``n_coarse`` (= ``len(masked) // factor``) coarse blocks of ``factor``
+    blocks whose ``masked`` fraction is at most :data:`MAX_FILLED_FRACTION` (all of them
+    without a mask, or when fewer than :data:`MIN_OBSERVED_BLOCKS` would remain)."""
     every = np.arange(n_coarse)
     if masked is None:
         return every
-    filled = block_means(np.asarray(masked[: n_coarse * factor], float), factor)
+    filled = block_means(np.asarray(masked, float), factor)  # len(masked) // factor blocks
     kept = np.flatnonzero(filled <= MAX_FILLED_FRACTION)
     return kept if len(kept) >= MIN_OBSERVED_BLOCKS else every
 
