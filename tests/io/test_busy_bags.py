@@ -10,6 +10,7 @@ reader and decodes each message with rosbags' CDR deserialiser, neither of them 
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.typesys import get_types_from_msg
 
+import imupipe
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, message_definition
 from imupipe.io.decode import IMU_SCHEMA, decode
@@ -31,6 +33,7 @@ from imupipe.testing.busy_bag import (
     imu_stream,
     other_streams,
     write_bag,
+    write_rosbag2,
 )
 from imupipe.units import RAD_PER_DEG
 from imupipe.vocab import AXES
@@ -220,3 +223,27 @@ def test_unchunked_messages_between_other_records(tmp_path: Path) -> None:
     assert rec.frames.height == len(imu.log_time) == len(stamps)
     np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
     assert_bits_equal(rec.frames.select(AXES).to_numpy(), axes)
+
+
+def test_imu_messages_lost_from_a_busy_bag_are_masked_on_the_grid(tmp_path: Path) -> None:
+    """A robot's bag (Imu at 100 Hz interleaved with /tf, /odom and a temperature topic, written
+    by the mcap library, stamps jittered) that lost IMU messages (one, then 1.5 s): the default
+    gap policy analyses the whole recording on its grid with exactly the lost places masked,
+    and the Allan variance at m = 1 loses the r + 1 terms touching each run of r."""
+    seconds, n = 120.0, 12_000
+    imu = imu_stream("/imu/data", seconds, 100.0, seed=4, awkward=False)
+    lost = {3000, *range(7000, 7150)}
+    kept = np.array([i for i in range(n) if i not in lost])
+    gapped = replace(imu, payloads=[imu.payloads[i] for i in kept], log_time=imu.log_time[kept])
+    write_rosbag2(tmp_path / "bag", [gapped, *other_streams(seconds, camera=False, seed=5)])
+    result = imupipe.analyze(
+        tmp_path / "bag", tmp_path / "out", rrd=False, figures=False, loop=False
+    )
+    report = result.to_dict()
+    warnings = " ".join(report["input"]["warnings"])
+    assert "2 gap(s) in time or frame counter (151 frames missing)" in warnings
+    assert f"uniform grid of {n} samples with 151 masked" in warnings
+    assert "longest clean segment" not in warnings
+    assert report["input"]["frames"] == n - 151
+    for axis in ("gyro_x", "accel_z"):
+        assert report["axes"][axis]["allan"]["n_terms"][0] == (n - 1) - 2 - 151
