@@ -96,6 +96,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     "pipeline/model/loop.py": (
         "tests/model/test_loop_rules.py",
         "tests/model/test_time_error.py",
+        "tests/model/test_loop_reuse.py",
         "tests/model/test_loop.py",
     ),
     "pipeline/model/effects.py": (

@@ -308,3 +308,15 @@ def test_blocks_touching_a_gap_are_left_out_and_events_stay_on_the_record_grid()
     assert event.duration_s == pytest.approx(BOX * DT, abs=2 * DT)
     a, b = event.excised
     assert a <= AT * 50 < (AT + BOX) * 50 <= b < (AT + BOX + 10) * 50
+
+
+def test_residual_scale_is_sigma_on_gaussian_windows_and_the_tail_scale_on_heavy_ones() -> None:
+    """The windows' residual scale: σ itself on Gaussian residuals (the winsorised SD; the tail
+    quantile agrees), and on a heavy-tailed core (Student t, 3 dof) the (1 − p) quantile of
+    |r| over the two-sided normal quantile Φ⁻¹(1 − p/2), so that core's tail is not read as
+    events (p = TAIL_P = 1e-3: 3.29)."""
+    rng = np.random.default_rng(7)
+    assert ev._robust_scale(2.0 * rng.standard_normal(200_000)) == pytest.approx(2.0, rel=0.02)
+    t = rng.standard_t(3, 200_000)
+    tail = np.quantile(np.abs(t), 1 - 1e-3) / 3.2905267314918945
+    assert ev._robust_scale(t) == pytest.approx(tail, rel=0.01)
