@@ -341,10 +341,8 @@ def _components(spans: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
 def _best_box(e: np.ndarray, v: np.ndarray) -> tuple[int, int]:
     """[a, b) of rows of ``e`` (residuals (L, A) from the level) maximising
     Σ_A (Σ_{[a,b)} e)² / ((b − a) v) (step 4); rows merged to ≤ :data:`MAX_BOX_POINTS`."""
-    merge = max(1, -(-len(e) // MAX_BOX_POINTS))
+    merge = -(-len(e) // MAX_BOX_POINTS)  # ≥ 1: an event spans at least one block
     k = len(e) // merge
-    if k < 1:
-        return 0, len(e)
     coarse = e[: k * merge].reshape(k, merge, -1).sum(axis=1)
     c = np.vstack([np.zeros((1, e.shape[1])), np.cumsum(coarse, axis=0)])
     stat = np.zeros((k + 1, k + 1))

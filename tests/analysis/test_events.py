@@ -320,3 +320,53 @@ def test_residual_scale_is_sigma_on_gaussian_windows_and_the_tail_scale_on_heavy
     t = rng.standard_t(3, 200_000)
     tail = np.quantile(np.abs(t), 1 - 1e-3) / 3.2905267314918945
     assert ev._robust_scale(t) == pytest.approx(tail, rel=0.01)
+
+
+def test_one_axis_recordings_are_searched_with_the_single_axis_threshold_alone() -> None:
+    """A recording with one analysable axis (the MTi-G gyro; the others stuck): no pair rule
+    (z2 = inf), and a box above z1 is found on it."""
+    means = unit_means(1, axes=1)
+    x = means["gyro_x"]
+    (scale,) = [s for s in ev._scales(x[:, None], DT) if s.length == BOX]
+    events, det = ev.find_events({"gyro_x": x + 0.0}, DT, 50, BLOCKS * 50)
+    assert events == [] and set(det.z_joint) == {np.inf}
+    k = det.scales_s.index(BOX * DT)
+    x[AT : AT + BOX] += 1.2 * det.z_single[k] * scale.sigma[0]
+    (event,) = ev.find_events({"gyro_x": x}, DT, 50, BLOCKS * 50)[0]
+    assert event.axes == ("gyro_x",) and event.start_s == AT * DT
+
+
+def test_the_longest_window_searched_is_512_s() -> None:
+    """Scales double from one fine block up to MAX_SCALE_S = 512 s inclusive (a record long
+    enough to hold more windows of 1024 s is not searched at 1024 s)."""
+    x = np.random.default_rng(0).standard_normal((80_000, 2))  # 11 h of 0.5 s blocks
+    lengths = [s.length * DT for s in ev._scales(x, DT)]
+    assert lengths == [DT * 2**k for k in range(11)]  # 0.5 s ... 512 s
+
+
+def test_the_box_search_of_a_day_long_event_stays_bounded() -> None:
+    """An event of 172 800 fine blocks (24 h) is boxed on at most MAX_BOX_POINTS merged blocks
+    (a (k + 1)² table of every [a, b): 0.24 TB unmerged), and the box is where the shift is,
+    to one merged block (⌈172 800 / 1024⌉ = 169 fine blocks)."""
+    e = np.zeros((172_800, 2))
+    e[43_200:86_400] = 5.0  # the shift: 6 h to 12 h
+    assert ev._best_box(e, np.ones(2)) == pytest.approx((43_200, 86_400), abs=169)
+
+
+def test_winsorised_variance_constant_is_the_gaussian_expectation() -> None:
+    """WINSOR_VAR = E[min(Z², c²)] for Z ~ N(0, 1), c = 3: by quadrature, independently of the
+    closed form the module uses."""
+    from scipy import integrate
+
+    c = ev.WINSOR_C
+    inside = integrate.quad(lambda z: z * z * np.exp(-z * z / 2) / np.sqrt(2 * np.pi), -c, c)[0]
+    assert ev.WINSOR_VAR == pytest.approx(inside + c * c * 2 * special.ndtr(-c), rel=1e-12)
+
+
+def test_a_perfectly_correlated_pair_exceeds_together_as_often_as_one_axis() -> None:
+    """|ρ| = 1 (two axes carrying the same noise): P(|X| > t and |Y| > t) = P(|X| > t), to
+    2 % (capped at 1 − 1e-9, the conditional law is a step that the quadrature's first node
+    sits on: 1.8 % low at t = 3; a threshold moves by < 0.01 σ)."""
+    t = 3.0
+    single = 2 * special.ndtr(-t)
+    assert ev.joint_tail(t, np.array([1.0, -1.0])) == pytest.approx([single] * 2, rel=0.02)
