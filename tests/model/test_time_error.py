@@ -6,33 +6,42 @@ a bug reported, not fixed here.)"""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from imupipe.analysis.condition import fill_runs
 from imupipe.model import effects
-from imupipe.model.loop import AxisSignals, _Axis, _State, aux_block_means, close_loop
+from imupipe.model.loop import (
+    AxisSignals,
+    _Axis,
+    _State,
+    aux_block_means,
+    close_loop,
+    time_domain_fit,
+)
 from imupipe.stats.allan import allan_curves
 
 TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
 N_WHITE, B_FLICKER = 3e-4, 5e-5  # rad/s/sqrt(Hz), rad/s
 
 
-def noise(seed: int) -> np.ndarray:
+def noise(seed: int, tau0: float = TAU0) -> np.ndarray:
     """White + flicker rate noise (IEEE 952 Annex C PSDs N^2 and B^2 / (2 pi f))."""
     rng = np.random.default_rng(seed)
-    f = np.fft.rfftfreq(2 * N, TAU0)
+    f = np.fft.rfftfreq(2 * N, tau0)
     shape = np.zeros_like(f)
-    shape[1:] = np.sqrt(2 * N / TAU0 / (2 * np.pi * f[1:]))
+    shape[1:] = np.sqrt(2 * N / tau0 / (2 * np.pi * f[1:]))
     bins = shape * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size))
     flicker = np.fft.irfft(bins / np.sqrt(2), 2 * N)[:N] * B_FLICKER
-    return N_WHITE / np.sqrt(TAU0) * rng.standard_normal(N) + flicker
+    return N_WHITE / np.sqrt(tau0) * rng.standard_normal(N) + flicker
 
 
-def run(y: np.ndarray, temp: np.ndarray | None = None):
-    curve = allan_curves(y, TAU0)[0]
-    aux = aux_block_means(temp, TAU0)
-    return close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, aux, None), curve)
+def run(y: np.ndarray, temp: np.ndarray | None = None, tau0: float = TAU0):
+    curve = allan_curves(y, tau0)[0]
+    aux = aux_block_means(temp, tau0)
+    return close_loop(AxisSignals("gyro_x", "gyro", y, tau0, aux, None), curve)
 
 
 @pytest.mark.parametrize("seed", [4, 5])
@@ -58,13 +67,14 @@ def test_time_error_falls_when_a_real_effect_is_removed() -> None:
     assert 0.9 < res.time_error_after < 1.05
 
 
-@pytest.mark.parametrize("period_s", [600.0, 97.0])
-def test_time_error_after_a_slow_sinusoid_is_about_one(period_s: float) -> None:
+@pytest.mark.parametrize("period_s, tau0", [(600.0, TAU0), (97.0, TAU0), (600.0, 0.3)])
+def test_time_error_after_a_slow_sinusoid_is_about_one(period_s: float, tau0: float) -> None:
     """A slow sinusoid (the independent generator's: 10-60 × the time-domain error left after
     the loop had modelled it) is a deterministic line: its sine and cosine are projected out of
-    the whitened series, so once the loop has modelled it the error is back near 1."""
-    t = np.arange(N) * TAU0
-    res = run(noise(11) + 3e-4 * np.sin(2 * np.pi * t / period_s + 0.4))
+    the whitened series, so once the loop has modelled it the error is back near 1 — also where
+    the loop's blocks are not 1 s (3.33 Hz: blocks of 3 samples, 0.9 s)."""
+    t = np.arange(N) * tau0
+    res = run(noise(11, tau0) + 3e-4 * np.sin(2 * np.pi * t / period_s + 0.4), tau0=tau0)
     assert [e.kind for e in res.accepted][:1] == ["sinusoid"]
     assert res.accepted[0].params["frequency_hz"] == pytest.approx(1 / period_s, rel=2e-3)
     assert 0.85 < res.time_error_after < 1.2
@@ -117,3 +127,18 @@ def test_a_correction_inside_a_gap_leaves_the_allan_curve_unchanged() -> None:
     assert np.array_equal(ax.corrected_avar(state, cand), state.avar)
     cand.correction = np.roll(in_gap, -len(gap_blocks))  # the same shift on observed blocks
     assert np.max(ax.corrected_avar(state, cand) / state.avar) > 2
+
+
+def test_time_fit_log_det_is_that_of_the_coarse_differences_covariance() -> None:
+    """TimeFit.log_det, the ln det Σ that makes the time-domain deviances of two models
+    comparable: under white rate noise N² the m differences of m + 1 independent coarse means
+    of variance v = N²/D (D the coarse span) have det Σ = (m + 1) vᵐ; the whitened residual of
+    white noise has error ≈ 1."""
+    names = ["random_walk", "bias_instability", "rate_random_walk"]
+    fit = SimpleNamespace(names=names, coef=[N_WHITE**2, 0.0, 0.0], cutoff_hz=np.inf)
+    y_d = N_WHITE * np.random.default_rng(3).standard_normal(4096)  # 1 s blocks: D = 4 s
+    found = time_domain_fit(fit, {}, y_d, 1.0)
+    m, v = 1023, N_WHITE**2 / 4.0
+    assert found.log_det == pytest.approx(m * np.log(v) + np.log(m + 1), rel=1e-7)
+    assert found.dof == m - 1  # the linear-ramp nuisance projected out
+    assert 0.9 < found.error < 1.1
