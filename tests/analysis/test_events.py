@@ -370,3 +370,32 @@ def test_a_perfectly_correlated_pair_exceeds_together_as_often_as_one_axis() -> 
     t = 3.0
     single = 2 * special.ndtr(-t)
     assert ev.joint_tail(t, np.array([1.0, -1.0])) == pytest.approx([single] * 2, rel=0.02)
+
+
+def test_the_event_box_weighs_each_axis_by_its_noise() -> None:
+    """The box maximises Σ_axes (Σ e)² / (L v) with each axis' own block variance v: a 30 σ
+    bump of 8 s on a quiet axis sets the event's extent over a 2 σ excursion of 32 s on a
+    noisy one (read with equal weights, the noisy axis' 32 s would win)."""
+    means = unit_means(6, axes=2)
+    means["gyro_x"] *= 0.01
+    means["gyro_x"][AT : AT + BOX] += 0.3
+    means["gyro_y"][AT : AT + 4 * BOX] += 2.0
+    (event,) = found(means)
+    assert event.axes == ("gyro_x", "gyro_y")
+    assert (event.start_s, event.duration_s) == (AT * DT, BOX * DT)
+
+
+def test_the_levels_either_side_of_an_event_are_medians_over_60_s() -> None:
+    """Size and level change read the level over LEVEL_SPAN_S = 60 s either side of the box:
+    a baseline that moved by 10 σ only 20 s before a bump is mostly the old level in that
+    minute, so the event carries a level change of about 10 σ (a transient still: less than
+    half its size)."""
+    means = unit_means(8, axes=2)
+    for a in means:
+        means[a][AT - 40 :] += 10.0
+        means[a][AT : AT + BOX] += 30.0
+    (event,) = found(means)
+    assert (event.start_s, event.duration_s) == (AT * DT, BOX * DT)
+    assert event.kind == "transient"
+    for a in means:
+        assert 8.5 < event.level_change[a] < 10.0
