@@ -440,7 +440,7 @@ def _event(
     row of ``x``'s place on the record's block grid (times and excision are on the grid)."""
     span = max(stop - first, round(LEVEL_SPAN_S / dt))
     outside = np.concatenate([x[max(first - span, 0) : first], x[stop : stop + span]])
-    level = np.median(outside, axis=0) if len(outside) else np.median(x, axis=0)
+    level = np.median(outside, axis=0)  # never empty: windows start after their neighbours
     sub = x[first:stop][:, touched] - level[touched]
     a, b = _best_box(sub, fine_v[touched])
     a, b = first + a, first + b
