@@ -59,3 +59,22 @@ def test_spike_free_series_is_not_searched_again_and_gives_the_same_model(
     assert trusted.terms_after.random_walk.value == searched.terms_after.random_walk.value
     assert [e.kind for e in trusted.accepted] == [e.kind for e in searched.accepted]
     assert [c.kind for c in trusted.rejected] == [c.kind for c in searched.rejected]
+
+
+def test_accepted_spikes_give_the_allan_curve_of_the_corrected_series():
+    """Spikes the loop accepts (twelve 0.5 s rectangles of 20 σ: they bend the curve at short
+    τ) are removed at full rate: its curve after is the overlapping Allan deviation of the
+    series minus the spike correction, at every τ (allan_curves of the corrected copy)."""
+    rng = np.random.default_rng(1)
+    y = WHITE * rng.standard_normal(N)
+    for at in rng.choice(N - 10, 12, replace=False):
+        y[at : at + 5] += 20 * WHITE
+    res = close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
+    assert [e.kind for e in res.accepted] == ["spike"]
+    fix = effects.spike_candidate(y, TAU0).spikes
+    assert len(fix.index) == 60  # every sample of the rectangles
+    corrected = y.copy()
+    corrected[fix.index] -= fix.value
+    expected = allan_curves(corrected, TAU0)[0]
+    assert res.tau_s == pytest.approx(np.asarray(expected.tau_s), rel=1e-12)
+    assert res.adev_after == pytest.approx(np.asarray(expected.adev), rel=1e-12)
