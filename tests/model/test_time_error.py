@@ -142,3 +142,22 @@ def test_time_fit_log_det_is_that_of_the_coarse_differences_covariance() -> None
     assert found.log_det == pytest.approx(m * np.log(v) + np.log(m + 1), rel=1e-7)
     assert found.dof == m - 1  # the linear-ramp nuisance projected out
     assert 0.9 < found.error < 1.1
+
+
+def test_a_tau_without_decimated_terms_keeps_its_measured_allan_value() -> None:
+    """At the longest τ the full-rate curve can hold a term where the 1 s blocks hold none: a
+    clean run of 50 240 samples that starts mid-block has a τ = 2511.9 s term, its 5023 whole
+    blocks none.  A slow correction changes the Allan value only where the blocks measure the
+    change; that τ keeps its measured value."""
+    y = noise(5)
+    excluded = np.zeros(N, bool)
+    excluded[:5] = excluded[50_245:90_000] = True
+    fill_runs(y, excluded, 5)
+    curve = allan_curves(y, TAU0, excluded=excluded)[0]
+    assert curve.tau_s[-1] == pytest.approx(2511.9)
+    ax = _Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None, excluded), curve)
+    state = _State(ax.avar, ax.y_d.copy(), None)
+    step = np.where(np.arange(len(ax.y_d)) >= 2_000, 3e-4, 0.0)  # on observed blocks
+    after = ax.corrected_avar(state, effects.Candidate("bias_step", {}, {}, correction=step))
+    assert after[-1] == state.avar[-1]
+    assert np.max(np.abs(after[:-1] / state.avar[:-1] - 1)) > 0.1  # elsewhere it does change
