@@ -186,3 +186,26 @@ def test_a_slow_correction_moves_the_allan_curve_to_the_corrected_series() -> No
     slow = ax.tau >= ax.dt
     assert np.max(ax.avar[slow] / expected[slow]) > 3  # the step dominates the long τ
     assert after[slow] == pytest.approx(expected[slow], rel=0.05)
+
+
+def test_a_line_in_a_masked_record_holds_out_on_both_halves_with_their_own_mask() -> None:
+    """An AVAR term of a record with a masked gap (5 min in the second half) is judged on the
+    curves of each half, each leaving out its own masked samples: the sinusoid is accepted,
+    held out on both halves, and the second half's curve skips the gap's terms."""
+    t = np.arange(N) * TAU0
+    y = noise(12) + 3e-4 * np.sin(2 * np.pi * t / 600 + 0.4)
+    excluded = np.zeros(N, bool)
+    excluded[90_000:93_000] = True
+    fill_runs(y, excluded, 5)
+    curve = allan_curves(y, TAU0, excluded=excluded)[0]
+    signals = AxisSignals("gyro_x", "gyro", y, TAU0, None, None, excluded)
+    res = close_loop(signals, curve)
+    assert [e.kind for e in res.accepted][:1] == ["sinusoid"]
+    holdout = res.accepted[0].evidence["holdout"]
+    assert holdout["holds"] and min(holdout["deviance_gain_heldout"]) > 10
+    ax = _Axis(signals, curve)
+    _, second = ax.half_curves(_State(ax.avar, ax.y_d.copy(), None))
+    h = N // 2
+    m = np.round(second[0] / TAU0).astype(int)
+    expected = allan_curves(y[h:], TAU0, m, excluded=excluded[h:])[0]
+    assert second[1] == pytest.approx(np.asarray(expected.adev) ** 2, rel=1e-12)
