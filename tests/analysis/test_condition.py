@@ -279,6 +279,7 @@ def test_mask_policy_keeps_the_whole_recording_around_a_missing_frame() -> None:
     assert s.tau0_s == pytest.approx(0.01)
     assert any("2 masked (0.2 %" in w for w in s.warnings)
     assert not any("longest clean segment" in w for w in s.warnings)
+    assert not any("measured mean rate" in w for w in s.warnings)
     x = rec.frames["gyro_x"][s.rows].to_numpy()
     y = s.on_grid(x)
     # each hole: the mean of the 0.5 s (50 samples) of usable data either side, not of the
@@ -286,6 +287,30 @@ def test_mask_policy_keeps_the_whole_recording_around_a_missing_frame() -> None:
     assert y[300] == pytest.approx((x[250:300].mean() + x[300:350].mean()) / 2, rel=1e-12)
     assert y[701] == pytest.approx((x[650:700].mean() + x[701:751].mean()) / 2, rel=1e-12)
     assert y[702] == x[701] and np.isfinite(y).all()
+
+
+def test_mask_policy_uses_the_measured_mean_period_of_a_slow_host_timer() -> None:
+    """A host timer 2 % slow (stamps every 10.2 ms, the device's 100 Hz in the metadata) with
+    one lost frame: the grid's sample interval is the measured mean period, the nominal rate is
+    still reported, and a warning names both."""
+    n = 2000
+    t = (np.arange(n) * 0.0102 * 1e9).astype(np.int64)
+    t[900:] += 10_200_000  # the lost frame
+
+    def stamps(a):
+        a[:] = t
+
+    def missing(a):
+        a[900:] += 1
+
+    s = condition(recording(n=n, stamp_ns=stamps, counter=missing), gaps="mask")
+    assert s.samples == n + 1 and np.flatnonzero(s.excluded).tolist() == [900]
+    assert s.tau0_s == pytest.approx(0.0102, rel=1e-9)
+    assert s.nominal_rate_hz == 100.0
+    assert (
+        "measured mean rate 98.0392 Hz differs from the nominal 100 Hz; the measured rate is used"
+        in s.warnings
+    )
 
 
 def test_fill_runs_draws_a_line_between_the_means_either_side() -> None:
