@@ -64,6 +64,9 @@ def test_one_missing_frame_splits_and_longest_is_chosen() -> None:
     rec = recording(stamp_ns=missing(300), counter=missing(300))
     s = condition(rec, gaps="longest")
     assert [seg.frames for seg in s.segments] == [300, 700]
+    # each segment's first and last stamp (s from the first frame): the lost frame's 10 ms
+    ends = [t for g in s.segments for t in (g.t_start_s, g.t_stop_s)]
+    assert ends == pytest.approx([0.0, 2.99, 3.01, 10.0], abs=1e-9)
     assert s.segment.frames == 700 and s.chosen == 1 and s.rows == slice(300, 1000)
     assert s.counts["missed_frames"] == 1
     assert any("gap" in w for w in s.warnings)
@@ -169,7 +172,10 @@ def test_drifting_rate_uses_measured_mean_period() -> None:
 
     s = condition(recording(n=n, stamp_ns=slow))
     assert s.tau0_s == pytest.approx(0.0102, rel=1e-6)
-    assert any("measured mean rate" in w for w in s.warnings)
+    assert (
+        "measured mean rate 98.0392 Hz differs from the nominal 100 Hz; the measured rate is used"
+        in s.warnings
+    )
 
 
 def test_jittery_stamps_warn() -> None:
@@ -295,6 +301,7 @@ def test_mask_policy_uses_the_measured_mean_period_of_a_slow_host_timer() -> Non
     still reported, and a warning names both."""
     n = 2000
     t = (np.arange(n) * 0.0102 * 1e9).astype(np.int64)
+    t += np.random.default_rng(2).integers(-100_000, 100_000, n)  # 0.1 ms of jitter
     t[900:] += 10_200_000  # the lost frame
 
     def stamps(a):
@@ -305,11 +312,12 @@ def test_mask_policy_uses_the_measured_mean_period_of_a_slow_host_timer() -> Non
 
     s = condition(recording(n=n, stamp_ns=stamps, counter=missing), gaps="mask")
     assert s.samples == n + 1 and np.flatnonzero(s.excluded).tolist() == [900]
-    assert s.tau0_s == pytest.approx(0.0102, rel=1e-9)
+    assert s.tau0_s == pytest.approx((t[-1] - t[0]) / n / 1e9, rel=1e-12)  # first to last
     assert s.nominal_rate_hz == 100.0
+    rate = n * 1e9 / (t[-1] - t[0])  # 98.039 Hz
     assert (
-        "measured mean rate 98.0392 Hz differs from the nominal 100 Hz; the measured rate is used"
-        in s.warnings
+        f"measured mean rate {rate:.4f} Hz differs from the nominal 100 Hz; the measured rate is "
+        "used" in s.warnings
     )
 
 
