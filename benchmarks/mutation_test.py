@@ -69,6 +69,13 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/io/test_ros_bags.py",
     ),
     "pipeline/analysis/events.py": ("tests/analysis/test_events.py",),
+    "pipeline/io/mcap_scan.py": (
+        "tests/io/test_fuzz_decoder.py",
+        "tests/io/test_busy_bags.py",
+        "tests/io/test_mcap_io.py",
+        "tests/io/test_cdr_rows.py",
+        "tests/io/test_decode_contract.py",
+    ),
     "pipeline/io/decode.py": (
         "tests/io/test_decode_contract.py",
         "tests/io/test_scale_factors.py",
