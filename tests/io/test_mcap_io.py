@@ -163,3 +163,40 @@ def test_not_mcap_and_empty_are_input_errors(tmp_path: Path) -> None:
     (tmp_path / "bag").mkdir()
     with pytest.raises(InputError, match="without MCAP files"):
         decode(tmp_path / "bag")
+
+
+def test_unreadable_records_are_skipped_and_counted_per_kind(tmp_path: Path) -> None:
+    """Records whose fields do not parse (two Metadata, one Channel after the data) are skipped
+    and counted per kind in the warnings; every message is still read."""
+    from mcap.records import Opcode
+
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    bad = (
+        hm.record(Opcode.METADATA, b"\xff\xff\xff\xff"),
+        hm.record(Opcode.METADATA, b"\x05"),
+        hm.record(Opcode.CHANNEL, b"\x01\x00\xff\xff\xff\xff"),
+    )
+    rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=bad))
+    assert rec.frames.height == 3000
+    assert list(rec.warnings) == [
+        "skipped 2 unreadable metadata record(s)",
+        "skipped 1 unreadable channel record(s)",
+    ]
+
+
+def test_a_malformed_message_outside_chunks_is_skipped_and_the_next_ones_read(
+    tmp_path: Path,
+) -> None:
+    """Unchunked Message records are read in blocks; a malformed one (a 1-byte body) opening a
+    block is counted and skipped, and the five good ones after it are read from where it ends."""
+    from mcap.records import Opcode
+
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    extra = (hm.record(Opcode.MESSAGE, b"\x01"), hm.imu_message_records(1, 5))
+    rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=extra))
+    assert rec.frames.height == 3005
+    assert list(rec.warnings) == ["skipped 1 unreadable message record(s)"]
