@@ -76,6 +76,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/io/test_cdr_rows.py",
         "tests/io/test_decode_contract.py",
         "tests/test_hostile.py",  # damaged and hostile files (~25 s)
+        "tests/test_odd_inputs.py",
     ),
     "pipeline/io/decode.py": (
         "tests/io/test_decode_contract.py",
