@@ -793,6 +793,13 @@ def time_domain_fit(
     τ ≥ the coarse block; above 1 when the series holds what the model lacks.  It sees only the
     slow part (τ ≥ T/1024; a faster line as its block means' alias)."""
     whiten = effects.Whitener(noise_psd(fit, shapes), len(y_d), dt, masked)
+    return _whitened_fit(whiten, shapes, y_d, dt)
+
+
+def _whitened_fit(whiten: effects.Whitener, shapes: Shapes, y_d: np.ndarray, dt: float) -> TimeFit:
+    """:func:`time_domain_fit` with the model's whitener already built (the current model's
+    is the one its time-domain candidates are tested with: an exact masked whitener costs an
+    O(m³) Cholesky, built once per round)."""
     yw = whiten(y_d)
     t = (np.arange(len(y_d)) + 0.5) * dt  # block centres: a block mean of a line is in phase
     tones = [shape[0] for kind, shape in shapes.values() if kind == "sinusoid"]
@@ -895,7 +902,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     tau, edf, dt = ax.tau, ax.edf, ax.dt
     masked = ax.masked_d
     whiten = _whitener(fit, state, ax, "")
-    time_old = time_domain_fit(fit, state.effect_parameters, state.y_d, dt, masked)
+    time_old = _whitened_fit(whiten, state.effect_parameters, state.y_d, dt)
 
     def errors(fit_new: ieee952.CompositeFit, new_state: _State, kind: str) -> ErrorChange:
         time_new = time_domain_fit(fit_new, new_state.effect_parameters, new_state.y_d, dt, masked)
