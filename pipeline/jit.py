@@ -10,15 +10,69 @@ run after installing, docs/performance.md).  Every kernel input array goes throu
 Kernels copy arrays element by element rather than by slice assignment (``a[:k] = b``): the
 first slice assignment a process compiles brings numba's shape-mismatch error message with
 it, string formatting compiled for ~1-2 s of CPU.
+
+No kernel is compiled ``parallel=True``: a ``prange`` kernel costs ~1.5 s more CPU to compile
+than the same loop compiled serially (numba's parfor passes and gufunc), and it needs a
+threading layer that takes launches from several threads at once (``workqueue`` aborts the
+process).  A kernel whose jobs are independent takes ``(start, step)`` and handles the jobs
+``start, start + step, ...``; :func:`spread` runs it on the cores the calling thread may use
+(:func:`cores_here`), each thread its own ``start``, the GIL released.
 """
 
 from __future__ import annotations
 
+import os
 import sys
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 
+import numba
 import numpy as np
 import numpy.typing as npt
 from numba.core.dispatcher import Dispatcher
+
+_share = threading.local()
+"""The calling thread's share of the cores (:func:`set_cores_here`)."""
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (its CPU affinity mask, else ``os.cpu_count()``)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def set_cores_here(cores: int) -> None:
+    """Let kernels called from this thread use ``cores`` threads (the axis pool gives each of
+    its n workers ``usable_cores() // n``)."""
+    _share.cores = max(1, int(cores))
+
+
+def cores_here() -> int:
+    """Threads a kernel called from this thread may use: the share :func:`set_cores_here`
+    gave it, else the usable cores; never more than ``NUMBA_NUM_THREADS`` (numba's setting,
+    which a fleet's one-core Dask workers set to 1)."""
+    share = getattr(_share, "cores", None)
+    return max(1, min(usable_cores() if share is None else share, numba.config.NUMBA_NUM_THREADS))
+
+
+def spread(kernel: Callable[[int, int], None], jobs: int) -> None:
+    """Run ``kernel(start, step)`` for every ``start`` < ``step`` = min(:func:`cores_here`,
+    ``jobs``), each on its own thread (the caller's among them), so that job j runs in thread
+    j mod step: interleaved, so that jobs whose cost falls with j (short τ first) spread
+    evenly.  The kernel releases the GIL (``nogil=True``) and writes its jobs' results into
+    arrays it closes over; an exception in any thread is raised here."""
+    step = max(1, min(cores_here(), jobs))
+    if step == 1:
+        kernel(0, 1)
+        return
+    with ThreadPoolExecutor(step - 1, thread_name_prefix="imupipe-kernel") as pool:
+        others = [pool.submit(kernel, start, step) for start in range(1, step)]
+        kernel(0, step)
+        for done in others:
+            done.result()
 
 
 def kernel_input(x: npt.ArrayLike, dtype: npt.DTypeLike = None) -> np.ndarray:

@@ -3,11 +3,14 @@ state."""
 
 from __future__ import annotations
 
+import threading
 from types import SimpleNamespace
 
+import numba
 import numpy as np
 import pytest
 
+from imupipe import jit
 from imupipe.jit import disk_cached, kernel_input
 
 
@@ -80,3 +83,51 @@ def test_the_spilled_paths_compile_child_runs_only_on_a_cold_cache(
     monkeypatch.setattr(orchestrator, "compile_kernels", lambda loop: None)
     orchestrator.load_kernels(True)
     assert len(children) == (0 if cached else 1)
+
+
+def test_cores_here_is_the_threads_share_capped_by_numba_num_threads(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(jit, "usable_cores", lambda: 4)
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 8)
+    seen: list[int] = []
+    worker = threading.Thread(target=lambda: seen.append(jit.cores_here()))
+    worker.start()
+    worker.join()
+    assert seen == [4]  # a thread without a share: every usable core
+    shared = threading.Thread(target=lambda: (jit.set_cores_here(3), seen.append(jit.cores_here())))
+    shared.start()
+    shared.join()
+    assert seen == [4, 3]
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 1)  # a fleet's one-core worker
+    assert jit.cores_here() == 1
+
+
+@pytest.mark.parametrize(("cores", "jobs", "threads"), [(3, 10, 3), (3, 2, 2), (1, 5, 1)])
+def test_spread_runs_every_job_once_interleaved_over_the_cores(
+    monkeypatch: pytest.MonkeyPatch, cores: int, jobs: int, threads: int
+) -> None:
+    monkeypatch.setattr(jit, "cores_here", lambda: cores)
+    calls: list[tuple[int, int, str]] = []
+    together = threading.Barrier(threads, timeout=10)  # all starts run at once
+
+    def kernel(start: int, step: int) -> None:
+        calls.append((start, step, threading.current_thread().name))
+        together.wait()
+
+    jit.spread(kernel, jobs)
+    assert sorted(c[:2] for c in calls) == [(s, threads) for s in range(threads)]
+    assert len({c[2] for c in calls}) == threads  # each start on its own thread
+    (mine,) = [c for c in calls if c[0] == 0]
+    assert mine[2] == threading.current_thread().name  # the caller works too
+
+
+def test_spread_raises_a_threads_exception(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(jit, "cores_here", lambda: 2)
+
+    def kernel(start: int, step: int) -> None:
+        if start == 1:
+            raise ValueError("job 1 failed")
+
+    with pytest.raises(ValueError, match="job 1 failed"):
+        jit.spread(kernel, 4)

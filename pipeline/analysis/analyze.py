@@ -34,7 +34,7 @@ from imupipe.analysis.condition import (
 )
 from imupipe.analysis.events import EventsFound, detect, event_mask, fill_excised, fine_means
 from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
-from imupipe.analysis.workers import axes_at_once, axis_pool, numba_threadsafe
+from imupipe.analysis.workers import axes_at_once, axis_pool
 from imupipe.errors import ImupipeError, TooFewFramesError
 from imupipe.io.columns import HOUSEKEEPING, ColumnSource, open_columns
 from imupipe.io.decode import ImuRecording
@@ -422,17 +422,15 @@ per sample; rounded up)."""
 def axis_concurrency(options: AnalyzeOptions, peak_bytes: int, samples: int) -> int:
     """Axes to analyse at once (:func:`imupipe.analysis.workers.axes_at_once`): ``workers``
     (default: the usable cores), as many as the memory budget leaves room for beyond the
-    estimated one-axis-at-a-time ``peak_bytes``, and only 1 when numba's threading layer
-    does not take ``prange`` kernels launched from several threads."""
+    estimated one-axis-at-a-time ``peak_bytes``."""
     if options.workers is not None and options.workers < 1:
         raise ImupipeError(f"workers must be at least 1, not {options.workers}")
-    n = axes_at_once(
+    return axes_at_once(
         options.workers,
         len(AXES),
         AXIS_BYTES_PER_SAMPLE * samples,
         options.memory_budget_bytes - peak_bytes,
     )
-    return n if n == 1 or numba_threadsafe() else 1
 
 
 def compile_kernels(loop: bool = True) -> None:

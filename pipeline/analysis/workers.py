@@ -6,42 +6,22 @@ worker is the very exception object the serial path would raise.  Every worker r
 functions on the same inputs as the serial path, so the results are bit-identical; they are
 collected in submission order (:data:`imupipe.vocab.AXES`).
 
-While ``n`` axes run at once, each worker's numba ``prange`` kernels use ``cores // n``
-threads (:func:`numba.set_num_threads` is per calling thread), so the workers and numba's own
-threads together never ask for more than the usable cores.
+While ``n`` axes run at once, each worker's kernels spread their jobs over ``cores // n``
+threads (:func:`imupipe.jit.set_cores_here`), so the workers and the kernels' threads together
+never ask for more than the usable cores.
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TypeVar
 
-import numba
+from imupipe.jit import set_cores_here, usable_cores
 
 T = TypeVar("T")
 R = TypeVar("R")
-
-THREADSAFE_LAYERS = frozenset({"tbb", "omp"})
-"""Numba threading layers that allow ``prange`` kernels launched from several threads at once
-(numba's documentation, "Selecting a threading layer"); ``workqueue`` aborts the process."""
-
-
-def usable_cores() -> int:
-    """Cores this process may run on (its CPU affinity mask, else ``os.cpu_count()``)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
-
-
-def numba_threadsafe() -> bool:
-    """Whether numba's threading layer takes concurrent launches (``get_num_threads`` starts
-    the layer, without which :func:`numba.threading_layer` cannot tell)."""
-    numba.get_num_threads()
-    return numba.threading_layer() in THREADSAFE_LAYERS
 
 
 def axes_at_once(workers: int | None, axes: int, axis_bytes: int, spare_bytes: int) -> int:
@@ -65,12 +45,11 @@ def axis_pool(n: int) -> Iterator[Callable[[Callable[[T], R], Iterable[T]], Iter
     if n <= 1:
         yield lambda fn, items: map(fn, items)
         return
-    numba_per_worker = max(1, min(usable_cores() // n, numba.config.NUMBA_NUM_THREADS))
     pool = ThreadPoolExecutor(
         n,
         thread_name_prefix="imupipe-axis",
-        initializer=numba.set_num_threads,
-        initargs=(numba_per_worker,),
+        initializer=set_cores_here,
+        initargs=(usable_cores() // n,),
     )
 
     def ordered(fn: Callable[[T], R], items: Iterable[T]) -> Iterator[R]:

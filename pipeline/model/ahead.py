@@ -27,7 +27,7 @@ from imupipe.jit import disk_cached
 from imupipe.model import effects, ieee952
 from imupipe.stats.allan import AllanCurve
 
-FIT_KERNELS = (ieee952._fit_designs, ieee952._fit_gamma, ieee952._nnls, ieee952._passive_lstsq)
+FIT_KERNELS = (ieee952._fit_gamma, ieee952._nnls, ieee952._passive_lstsq)
 """The IEEE 952 fit's kernels (~7 s of CPU to compile, the longest chain)."""
 LOOP_KERNELS = (effects._innovations, effects._hann_windowed)
 """Kernels first called by the closed loop: its whitener and its periodogram.  (The R(n) noise

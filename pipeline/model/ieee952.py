@@ -262,10 +262,15 @@ def _nnls(
     """
     m, n = a.shape
     tol = 0.0
+    any_guess = False
     for k in range(n):
-        tol = max(tol, np.abs(a[:, k]).sum())
+        column = 0.0
+        for i in range(m):
+            column += abs(a[i, k])
+        tol = max(tol, column)
+        any_guess = any_guess or guess[k]
     tol *= 10.0 * 2.220446049250313e-16 * max(m, n)
-    if guess.any():
+    if any_guess:
         z = _passive_lstsq(a, b, guess)
         w = _gradient(a, b, z)
         optimal = True
@@ -278,7 +283,9 @@ def _nnls(
     passive = np.zeros(n, dtype=np.bool_)
     for _ in range(maxiter):
         w = _gradient(a, b, x)
-        blocked = passive.copy()
+        blocked = np.empty(n, dtype=np.bool_)
+        for k in range(n):
+            blocked[k] = passive[k]
         z = x
         while True:  # the most promising free column whose unconstrained solve stays positive
             j, top = -1, tol
@@ -300,7 +307,10 @@ def _nnls(
                     alpha, stop = x[k] / (x[k] - z[k]), k
             if stop < 0:
                 break
-            x = x + alpha * (z - x)
+            moved = np.empty(n)
+            for k in range(n):
+                moved[k] = x[k] + alpha * (z[k] - x[k])
+            x = moved
             x[stop] = 0.0
             for k in range(n):
                 if passive[k] and x[k] <= 0:
@@ -328,7 +338,10 @@ def _fit_gamma(
     design: np.ndarray, avar: np.ndarray, edf: np.ndarray, offset: np.ndarray, start: np.ndarray
 ) -> tuple[np.ndarray, float]:  # pragma: no cover (JIT)
     """:func:`fit_nonneg_gamma` compiled: Fisher scoring on unit-norm columns, from ``start``
-    (all zero: from nothing, the first step taken whatever its deviance)."""
+    (all zero: from nothing, the first step taken whatever its deviance).  Written in loops
+    rather than numpy functions, which compile with each kernel that uses them (``avar.max()``
+    ~1 s of CPU on a first run); the model's ``xs @ coef`` stays a BLAS product, whose rounding
+    the fits' results are pinned to."""
     n, p = design.shape
     scale = np.zeros(p)
     for i in range(n):  # row by row, as numpy's reduction over axis 0
@@ -340,53 +353,71 @@ def _fit_gamma(
     for i in range(n):
         for k in range(p):
             xs[i, k] = design[i, k] / scale[k]
-    floor = 1e-12 * avar.max()
-    mu = avar.copy()
-    coef = start * scale
+    top = avar[0]
+    for i in range(n):
+        top = max(top, avar[i])
+    floor = 1e-12 * top
+    mu = np.empty(n)
+    target = np.empty(n)
+    for i in range(n):
+        mu[i] = avar[i]
+        target[i] = avar[i] - offset[i]
+    coef = np.empty(p)
+    warm = False
+    for k in range(p):
+        coef[k] = start[k] * scale[k]
+        warm = warm or start[k] > 0
     dev = np.inf
-    if np.any(start > 0):  # a warm start: no step may leave it for a worse deviance
+    if warm:  # a warm start: no step may leave it for a worse deviance
         mu = np.maximum(offset + xs @ coef, floor)
         dev = _deviance(avar, mu, edf)
-    sqrt_edf = np.sqrt(edf)
-    target = avar - offset
-    new = coef
     weighted = np.empty((n, p))
+    rhs = np.empty(n)
+    positive = np.empty(p, dtype=np.bool_)
+    step = np.empty(p)
+    new, trial, mu_t, dev_t = coef, coef, mu, dev
     for _ in range(100):
-        w = sqrt_edf / mu
         for i in range(n):
+            w = np.sqrt(edf[i]) / mu[i]
+            rhs[i] = target[i] * w
             for k in range(p):
-                weighted[i, k] = xs[i, k] * w[i]
-        new = _nnls(weighted, target * w, 50 * p, new > 0)
-        step = new - coef
+                weighted[i, k] = xs[i, k] * w
+        for k in range(p):
+            positive[k] = new[k] > 0
+        new = _nnls(weighted, rhs, 50 * p, positive)
+        for k in range(p):
+            step[k] = new[k] - coef[k]
         for _ in range(30):
-            trial = coef + step
+            trial = np.empty(p)
+            for k in range(p):
+                trial[k] = coef[k] + step[k]
             mu_t = np.maximum(offset + xs @ trial, floor)
             dev_t = _deviance(avar, mu_t, edf)
             if dev_t <= dev or not np.isfinite(dev):
                 break
-            step = step / 2
+            for k in range(p):
+                step[k] /= 2
         converged = np.isfinite(dev) and dev - dev_t <= 1e-10 * max(dev_t, 1.0)
         coef, mu, dev = trial, mu_t, dev_t
         if converged:
             break
-    return coef / scale, dev
+    out = np.empty(p)
+    for k in range(p):
+        out[k] = coef[k] / scale[k]
+    return out, dev
 
 
-@numba.njit(cache=True, nogil=True)
 def _fit_designs(
     designs: np.ndarray, avar: np.ndarray, edf: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover (JIT)
-    """:func:`fit_nonneg_gamma` of every design (n_fit, n_tau, p) to the same data: the
-    cut-off × sign profile of :func:`fit_composite` in one compiled call."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fit_nonneg_gamma` of every design (n_fit, n_tau, p) to the same data, from zero:
+    the cut-off × sign profile of :func:`fit_composite`.  A loop here, not a kernel: a kernel
+    calling :func:`_fit_gamma` would compile (re-optimise) the whole fit once more, ~2 s of CPU
+    on a first run, to save ~5 µs per design."""
     offset = np.zeros(avar.size)
     start = np.zeros(designs.shape[2])
-    coefs = np.empty((designs.shape[0], designs.shape[2]))
-    devs = np.empty(designs.shape[0])
-    for f in range(designs.shape[0]):
-        coef, devs[f] = _fit_gamma(designs[f], avar, edf, offset, start)
-        for k in range(coef.size):  # not a row assignment: see imupipe.jit
-            coefs[f, k] = coef[k]
-    return coefs, devs
+    fits = [_fit_gamma(design, avar, edf, offset, start) for design in designs]
+    return np.array([coef for coef, _ in fits]), np.array([dev for _, dev in fits])
 
 
 def fit_nonneg_gamma(

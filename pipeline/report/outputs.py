@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import polars as pl
 
 from imupipe.analysis.results import AnalysisResult
-from imupipe.analysis.workers import usable_cores
+from imupipe.jit import usable_cores
 from imupipe.progress import StageProgress
 from imupipe.report.report import write_report
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from imupipe.jit import kernel_input
+from imupipe.jit import kernel_input, spread
 from imupipe.stats.edf import chi2_interval, edf_oadev, noise_ids
 
 FIT_MIN_TERMS = 2
@@ -219,67 +219,80 @@ SUM_BLOCK = 1 << 15
 while the block's phase (256 KB; three such windows for a long lag) stays in the core's cache."""
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True, nogil=True)
-def _sum_sq_second_diff_runs(
-    x: np.ndarray, m: np.ndarray, runs: np.ndarray
-) -> np.ndarray:  # pragma: no cover (JIT)
-    """:func:`_sum_sq_second_diff` over the terms inside the clean ``runs`` only: run [s, e) of
-    samples holds the terms i = s .. e - 2m (their samples i .. i + 2m - 1 all lie in it)."""
+@numba.njit(fastmath=True, cache=True, nogil=True)
+def _run_sums(
+    x: np.ndarray, m: np.ndarray, runs: np.ndarray, out: np.ndarray, start: int, step: int
+) -> None:  # pragma: no cover (JIT)
+    """:func:`_block_sums`' terms inside the clean ``runs`` only, one job per (m, axis): jobs
+    ``start, start + step, ...`` (:func:`imupipe.jit.spread`) of (m.size × k), into
+    ``out[j, a]``.  Run [s, e) of samples holds the terms i = s .. e - 2m (their samples
+    i .. i + 2m - 1 all lie in it)."""
     k = x.shape[0]
-    out = np.empty((m.size, k))
-    for job in numba.prange(m.size * k):
+    for job in range(start, m.size * k, step):
         j, a = job // k, job % k
         lag = m[j]
         row = x[a]
         acc = 0.0
         for r in range(runs.shape[0]):
-            start = runs[r, 0]
+            first = runs[r, 0]
             # slices: indices from 0, which numba knows are not negative, so the sum vectorises
-            far, mid, near = row[start + 2 * lag :], row[start + lag :], row[start:]
-            for i in range(runs[r, 1] - 2 * lag + 1 - start):
+            far, mid, near = row[first + 2 * lag :], row[first + lag :], row[first:]
+            for i in range(runs[r, 1] - 2 * lag + 1 - first):
                 d = far[i] - 2.0 * mid[i] + near[i]
                 acc += d * d
         out[j, a] = acc
-    return out
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True, nogil=True)
-def _sum_sq_second_diff(x: np.ndarray, m: np.ndarray) -> np.ndarray:  # pragma: no cover (JIT)
-    """sum_i (x[a, i+2m] - 2 x[a, i+m] + x[a, i])**2 over the N - 2m terms, for every m and axis.
+@numba.njit(fastmath=True, cache=True, nogil=True)
+def _block_sums(
+    x: np.ndarray, m: np.ndarray, part: np.ndarray, start: int, step: int
+) -> None:  # pragma: no cover (JIT)
+    """part[a, b, j] = sum_i (x[a, i+2m] - 2 x[a, i+m] + x[a, i])**2 over the terms i of block
+    b (:data:`SUM_BLOCK` samples) for factor m[j], for the jobs (a, b) ``start, start + step,
+    ...`` (:func:`imupipe.jit.spread`) of (k × blocks).
 
-    ``x`` is (k, N) phase, one contiguous row per axis; returns (len(m), k).  Blocked over i:
-    each job sums the terms i of one block of :data:`SUM_BLOCK` samples for every m (the
-    block's phase is read from the cache, not from memory, once per m), jobs spread over the
-    cores; the block sums are then added up in one thread, so the result does not depend on
-    the number of threads.  The inner loop runs over slices (indices from 0, which numba knows are
-    not negative) and ``fastmath`` lets the compiler vectorise it by reassociating the sum:
-    the result changes only by rounding (~1e-14 relative), the per-block sums keep it at least
-    as accurate as one running sum.  12 h at 100 Hz, 61 factors, one axis: 0.08 s of CPU
-    against 0.50 s for one unblocked scalar pass per m.
-    """
+    Each job sums one block for every m, so the block's phase is read from the cache, not from
+    memory, once per m; :func:`_sum_sq_second_diff` adds the blocks up.  The inner loop runs
+    over slices (indices from 0, which numba knows are not negative) and ``fastmath`` lets the
+    compiler vectorise it by reassociating the sum: the result changes only by rounding
+    (~1e-14 relative), the per-block sums keep it at least as accurate as one running sum.
+    12 h at 100 Hz, 61 factors, one axis: 0.08 s of CPU against 0.50 s for one unblocked
+    scalar pass per m."""
     k, size = x.shape
-    blocks = (size + SUM_BLOCK - 1) // SUM_BLOCK
-    part = np.zeros((k, blocks, m.size))
-    for job in numba.prange(k * blocks):
+    blocks = part.shape[1]
+    for job in range(start, k * blocks, step):
         a, b = job // blocks, job % blocks
         row = x[a]
-        start = b * SUM_BLOCK
+        first = b * SUM_BLOCK
         for j in range(m.size):
             lag = m[j]
-            count = min(start + SUM_BLOCK, size - 2 * lag) - start
-            far, mid, near = row[start + 2 * lag :], row[start + lag :], row[start:]
+            count = min(first + SUM_BLOCK, size - 2 * lag) - first
+            far, mid, near = row[first + 2 * lag :], row[first + lag :], row[first:]
             acc = 0.0
             for i in range(count):
                 d = far[i] - 2.0 * mid[i] + near[i]
                 acc += d * d
             part[a, b, j] = acc
-    out = np.empty((m.size, k))
-    for a in range(k):
-        for j in range(m.size):
-            acc = 0.0
-            for b in range(blocks):
-                acc += part[a, b, j]
-            out[j, a] = acc
+
+
+def _sum_sq_second_diff(x: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """sum_i (x[a, i+2m] - 2 x[a, i+m] + x[a, i])**2 over the N - 2m terms, (len(m), k), for
+    every m and axis of the (k, N) phase ``x`` (one contiguous row per axis): the blocks'
+    sums (:func:`_block_sums`, spread over the cores) added up in block order, so the result
+    does not depend on the number of threads."""
+    k, size = x.shape
+    blocks = (size + SUM_BLOCK - 1) // SUM_BLOCK
+    part = np.zeros((k, blocks, m.size))
+    spread(lambda start, step: _block_sums(x, m, part, start, step), k * blocks)
+    # a running sum in block order (a sum over axis 1 may be pairwise when m has one factor)
+    return np.ascontiguousarray(part.cumsum(axis=1)[:, -1].T)
+
+
+def _sum_sq_second_diff_runs(x: np.ndarray, m: np.ndarray, runs: np.ndarray) -> np.ndarray:
+    """:func:`_sum_sq_second_diff` over the terms inside the clean ``runs`` only
+    (:func:`_run_sums`, spread over the cores)."""
+    out = np.empty((m.size, x.shape[0]))
+    spread(lambda start, step: _run_sums(x, m, runs, out, start, step), m.size * x.shape[0])
     return out
 
 

@@ -23,6 +23,8 @@ import numba
 import numpy as np
 from scipy.special import comb, gammaincinv
 
+from imupipe.jit import spread
+
 ACF_MIN_POINTS = 30
 """Fewest averaged points for which the lag-1 ACF method is used (Riley & Greenhall 2004)."""
 
@@ -252,23 +254,24 @@ def b1_noise_id(x: np.ndarray, m: int) -> int:
     return 2 if _mvar_over_avar(x, m) < bound else 1
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
-def _acf_ids(x: np.ndarray, m: np.ndarray, copy_max: int) -> np.ndarray:  # pragma: no cover (JIT)
-    """:func:`acf_noise_id` of the m-averaged frequencies for each factor in ``m``, in parallel;
-    series of at most ``copy_max`` values are formed once and read contiguously, longer ones
-    are read from the phase on the fly (same values either way)."""
-    out = np.empty(m.size, dtype=np.int64)
-    for i in numba.prange(m.size):
+@numba.njit(cache=True, nogil=True)
+def _acf_ids(
+    x: np.ndarray, m: np.ndarray, copy_max: int, out: np.ndarray, start: int, step: int
+) -> None:  # pragma: no cover (JIT)
+    """``out[i]`` = :func:`acf_noise_id` of the m-averaged frequencies for the factors
+    ``m[i]``, i = ``start, start + step, ...`` (:func:`imupipe.jit.spread`); series of at most
+    ``copy_max`` values are formed once and read contiguously, longer ones are read from the
+    phase on the fly (same values either way)."""
+    for i in range(start, m.size, step):
         count = (x.size - 1) // m[i]
-        src, step, phase = x, m[i], True
+        src, stride, phase = x, m[i], True
         if count <= copy_max:
             src = np.empty(count)
             for t in range(count):
                 src[t] = _value(x, m[i], True, t)
-            step, phase = 1, False
-        # one call: a single compiled _acf_noise_id (step int64, phase bool, not literals)
-        out[i] = _acf_noise_id(src, step, phase, count, 2)
-    return out
+            stride, phase = 1, False
+        # one call: a single compiled _acf_noise_id (stride int64, phase bool, not literals)
+        out[i] = _acf_noise_id(src, stride, phase, count, 2)
 
 
 def noise_ids(x: np.ndarray, m: np.ndarray, redder_tail: bool = False) -> np.ndarray:
@@ -293,7 +296,9 @@ def noise_ids(x: np.ndarray, m: np.ndarray, redder_tail: bool = False) -> np.nda
     """
     m = np.asarray(m, dtype=np.int64)
     points = (x.size - 1) // m  # m-averaged frequencies
-    acf = _acf_ids(x, m[points >= ACF_MIN_POINTS], ACF_COPY_MAX)
+    acf_m = m[points >= ACF_MIN_POINTS]
+    acf = np.empty(acf_m.size, dtype=np.int64)
+    spread(lambda start, step: _acf_ids(x, acf_m, ACF_COPY_MAX, acf, start, step), acf_m.size)
     alphas = np.empty(len(m), dtype=np.int64)
     previous = 0
     for i, mi in enumerate(m):

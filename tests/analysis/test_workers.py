@@ -12,6 +12,7 @@ import psutil
 import pytest
 
 import imupipe
+from imupipe import jit
 from imupipe.analysis import analyze as orchestrator
 from imupipe.analysis import workers
 from imupipe.analysis.analyze import AnalyzeOptions, axis_concurrency
@@ -112,7 +113,7 @@ def test_axes_at_once_obeys_workers_axes_and_memory(monkeypatch: pytest.MonkeyPa
     assert workers.axes_at_once(4, 6, 100, -5_000) == 1  # over the budget already
 
 
-def test_axis_concurrency_budgets_memory_and_checks_numba(
+def test_axis_concurrency_budgets_memory(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     samples = 1_000_000
@@ -121,17 +122,18 @@ def test_axis_concurrency_budgets_memory_and_checks_numba(
     assert axis_concurrency(options, 8 * axis, samples) == 3
     assert axis_concurrency(options, 10 * axis, samples) == 1
     assert axis_concurrency(AnalyzeOptions(workers=1), 0, samples) == 1
-    monkeypatch.setattr(numba, "threading_layer", lambda: "workqueue")
-    assert axis_concurrency(options, 0, samples) == 1  # prange from two threads would abort
     with pytest.raises(ImupipeError, match="workers must be at least 1, not 0"):
         axis_concurrency(AnalyzeOptions(workers=0), 0, samples)
 
 
-def test_pool_workers_share_the_cores_with_numba(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(workers, "usable_cores", lambda: 2)
+def test_pool_workers_share_the_cores_with_their_kernels(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(jit, "usable_cores", lambda: 6)
+    monkeypatch.setattr(workers, "usable_cores", lambda: 6)
+    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 8)
     with workers.axis_pool(2) as run:
-        counts = list(run(lambda _: numba.get_num_threads(), range(4)))
-    assert counts == [1, 1, 1, 1]
+        counts = list(run(lambda _: jit.cores_here(), range(4)))
+    assert counts == [3, 3, 3, 3]
+    assert jit.cores_here() == min(6, numba.config.NUMBA_NUM_THREADS)  # the caller's own
     with workers.axis_pool(1) as run:
         assert (
             list(run(lambda _: threading.current_thread().name, range(2)))

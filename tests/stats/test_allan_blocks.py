@@ -4,11 +4,14 @@ longer than a block, for every axis."""
 
 from __future__ import annotations
 
+import functools
 import math
+import operator
 
-import numba
 import numpy as np
+import pytest
 
+from imupipe.jit import set_cores_here, usable_cores
 from imupipe.stats import allan
 from imupipe.stats.allan import oadev
 
@@ -29,16 +32,22 @@ def test_sums_over_several_blocks_equal_the_textbook_expression():
             assert abs(ours[j, a] / textbook - 1) < 1e-13, (mj, a)
 
 
-def test_block_sums_do_not_depend_on_the_thread_count():
-    """Each block's sum is formed by one job and the blocks are added in one thread: the
-    result is the same bits with one thread or all of them."""
-    y = np.random.default_rng(22).standard_normal(2 * allan.SUM_BLOCK + 99)
-    m = allan.tau_factors(y.size)
-    everything = oadev(y, 1.0, m)[0]
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        one = oadev(y, 1.0, m)[0]
-    finally:
-        numba.set_num_threads(threads)
-    assert np.array_equal(one, everything)
+@pytest.mark.parametrize("factors", ["grid", "one"])
+def test_block_sums_are_added_in_block_order_whatever_the_thread_count(factors: str):
+    """Each block's sum is formed by one job and the blocks are added in block order: the
+    result is the same bits with one thread or three, and with a single factor m too (where a
+    numpy sum over the blocks would add them pairwise, in another order)."""
+    rng = np.random.default_rng(2)  # a seed where a pairwise sum of the blocks differs
+    y = rng.standard_normal(40 * allan.SUM_BLOCK + 99)
+    y *= np.repeat(rng.uniform(1, 2, 41), allan.SUM_BLOCK)[: y.size]
+    m = allan.tau_factors(y.size) if factors == "grid" else np.array([3])
+    x = allan.phase(y, 1.0)[None]
+    part = np.zeros((1, 41, m.size))
+    allan._block_sums(x, m, part, 0, 1)
+    in_order = functools.reduce(operator.add, part[0], np.zeros(m.size))
+    for threads in (1, 3):
+        set_cores_here(threads)
+        try:
+            assert np.array_equal(allan._sum_sq_second_diff(x, m)[:, 0], in_order), threads
+        finally:
+            set_cores_here(usable_cores())
