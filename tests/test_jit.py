@@ -99,6 +99,15 @@ def test_cores_here_is_the_threads_share_capped_by_numba_num_threads(
     shared.start()
     shared.join()
     assert seen == [4, 3]
+
+    def no_share() -> None:  # more axis workers than cores: usable_cores() // n is 0
+        jit.set_cores_here(0)
+        seen.append(jit.cores_here())
+
+    starved = threading.Thread(target=no_share)
+    starved.start()
+    starved.join()
+    assert seen == [4, 3, 1]
     monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", 1)  # a fleet's one-core worker
     assert jit.cores_here() == 1
 

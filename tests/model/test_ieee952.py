@@ -226,6 +226,17 @@ def test_compiled_nnls_matches_scipy_and_kkt():
             assert np.all(np.abs(grad[got > 0]) <= tol) and np.all(grad[got == 0] <= tol)
 
 
+@pytest.mark.parametrize("guess", [(False, False), (True, False)])
+def test_nnls_stops_at_the_largest_columns_tolerance(guess: tuple[bool, bool]):
+    """The KKT tolerance is 10 ε max(m, n) × the largest column's ℓ1 norm (Lawson & Hanson's
+    rule): a column whose gradient lies below it — here a 1e-9 column, gradient 1e-15 against
+    a tolerance of 6.7e-12 — stays out, rather than entering with a coefficient of 1000 that
+    only rounding asks for (a tolerance from the last column alone would let it in)."""
+    a = np.array([[1000.0, 0.0], [0.0, 1e-9], [0.0, 0.0]])
+    b = np.array([1000.0, 1e-6, 0.0])
+    assert ieee952._nnls(a, b, 100, np.array(guess)).tolist() == [1.0, 0.0]
+
+
 def test_compiled_irls_matches_scipy_reference():
     """fit_nonneg_gamma (compiled IRLS) = the scipy-per-iteration IRLS to rounding, on noisy
     AVAR curves of the composite model (some coefficients at the bound) with and without offset."""

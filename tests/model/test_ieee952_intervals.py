@@ -309,3 +309,8 @@ def test_profile_of_a_sinusoid_column_starts_from_the_optimum() -> None:
         fit.deviance, rel=1e-9
     )
     assert ieee952.fit_nonneg_gamma(others, avar, nu, offset)[1] > 1e9  # from zero: stuck
+    near_best = at_best.copy()
+    near_best[-1] = 0.0  # R 4e-16: any positive coefficient makes the start a warm one
+    assert ieee952.fit_nonneg_gamma(others, avar, nu, offset, near_best)[1] == pytest.approx(
+        fit.deviance, rel=1e-9
+    )
