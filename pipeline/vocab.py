@@ -18,6 +18,8 @@ AXES: tuple[str, ...] = ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "ac
 GYRO_AXES: tuple[str, ...] = AXES[:3]
 ACCEL_AXES: tuple[str, ...] = AXES[3:]
 AXES_OF: dict[str, tuple[str, ...]] = {"gyro": GYRO_AXES, "accel": ACCEL_AXES}
+SENSOR_TITLES: dict[str, str] = {"gyro": "Gyroscopes", "accel": "Accelerometers"}
+"""Each sensor's name in figure titles."""
 
 SI_RATE_UNIT: dict[str, str] = {"gyro": "rad/s", "accel": "m/s^2"}
 """The SI unit of each sensor's samples."""

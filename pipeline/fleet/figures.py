@@ -1,4 +1,5 @@
-"""PNG figures of ``fleet.md`` (matplotlib, Agg backend).
+"""PNG figures of ``fleet.md`` (matplotlib, Agg backend), drawn where
+:func:`imupipe.fleet.figure_plan.draw` runs a job (on the fleet's workers).
 
 - ``fleet_adev_<sensor>.png``: one panel per axis, every unit's overlapping Allan deviation
   (thin lines) over the population median and its 95 % band (:mod:`imupipe.fleet.curves`);
@@ -10,8 +11,7 @@
 from __future__ import annotations
 
 import io
-from collections.abc import Callable, Iterable, Mapping
-from pathlib import Path
+from collections.abc import Mapping
 
 import matplotlib
 
@@ -24,20 +24,23 @@ from matplotlib.figure import Figure
 
 from imupipe.fleet.curves import UNIT_COLUMN
 from imupipe.fleet.population import TermStats, final_terms
+from imupipe.report.figures import sparse_log_ticks
 from imupipe.units import PAPER_UNIT, from_si
-from imupipe.vocab import AXES_OF
+from imupipe.vocab import AXES_OF, SENSOR_TITLES
 
 STRIP_TERMS: tuple[tuple[str, str], ...] = (
     ("random_walk", "N"),
     ("bias_instability", "B"),
     ("rate_random_walk", "K"),
 )
-_TITLES = {"gyro": "Gyroscopes", "accel": "Accelerometers"}
+
+
+_MARGINS = {"left": 0.07, "right": 0.99, "bottom": 0.12, "top": 0.86, "wspace": 0.28}
+"""Fixed margins of the one-row figures: a layout engine costs an extra draw of every tick."""
 
 
 def _png(fig: Figure) -> bytes:
-    """The figure laid out and encoded as PNG (100 dpi), then closed."""
-    fig.tight_layout()
+    """The figure encoded as PNG (100 dpi), then closed."""
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=100)
     plt.close(fig)
@@ -50,7 +53,9 @@ def adev_figure(fleet: pl.DataFrame, pop: pl.DataFrame, sensor: str) -> bytes | 
     axes = [a for a in AXES_OF[sensor] if a in set(fleet["axis"].unique())]
     if not axes:
         return None
-    fig, panels = plt.subplots(1, len(axes), figsize=(4.2 * len(axes), 4.2), squeeze=False)
+    fig, panels = plt.subplots(
+        1, len(axes), figsize=(4.2 * len(axes), 4.2), squeeze=False, gridspec_kw=_MARGINS
+    )
     for ax, axis in zip(panels[0], axes, strict=True):
         part = fleet.filter(pl.col("axis") == axis)
         curves = [
@@ -67,13 +72,15 @@ def adev_figure(fleet: pl.DataFrame, pop: pl.DataFrame, sensor: str) -> bytes | 
         ax.set_title(axis)
         ax.set_xlabel("averaging time τ [s]")
         ax.grid(True, which="major", lw=0.4, alpha=0.6)
+        sparse_log_ticks(ax.xaxis, ax.yaxis)
     unit = fleet.filter(pl.col("axis") == axes[0])["unit"][0]
     panels[0][0].set_ylabel(f"Allan deviation σ(τ) [{unit}]")
     panels[0][0].plot([], [], color="0.55", lw=0.7, label="each unit")
     panels[0][0].plot([], [], color="tab:blue", lw=2.0, label="population median")
     panels[0][0].fill_between([], [], [], color="tab:blue", alpha=0.25, label="95 % of units")
     panels[0][0].legend(fontsize=7)
-    fig.suptitle(f"{_TITLES[sensor]}: Allan deviation of {fleet[UNIT_COLUMN].n_unique()} units")
+    units = fleet[UNIT_COLUMN].n_unique()
+    fig.suptitle(f"{SENSOR_TITLES[sensor]}: Allan deviation of {units} units")
     return _png(fig)
 
 
@@ -86,7 +93,9 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
     by_key = {(s.axis, s.term): s for s in stats}
     names = sorted(reports)
     offsets = np.linspace(-0.3, 0.3, len(names)) if len(names) > 1 else np.zeros(1)
-    fig, panels = plt.subplots(1, len(STRIP_TERMS), figsize=(4.2 * len(STRIP_TERMS), 4.2))
+    fig, panels = plt.subplots(
+        1, len(STRIP_TERMS), figsize=(4.2 * len(STRIP_TERMS), 4.2), gridspec_kw=_MARGINS
+    )
     for ax, (term, symbol) in zip(panels, STRIP_TERMS, strict=True):
         unit = PAPER_UNIT[sensor][term]
         # one artist per kind of point and panel: an errorbar per unit costs seconds to lay out
@@ -124,7 +133,7 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
             x, v = np.array(bounds).T
             ax.plot(x, v, "v", color="0.5", ms=4, ls="none")
         ax.set_xticks(range(len(axes)), axes)
-        ax.set_yscale("log")
+        ax.set_yscale("log")  # spans about a decade: matplotlib's minor ticks label it
         ax.set_title(f"{symbol} [{unit}]")
         ax.grid(True, axis="y", which="major", lw=0.4, alpha=0.6)
     shown = [by_key[(a, t)] for a in axes for t, _ in STRIP_TERMS if (a, t) in by_key]
@@ -136,52 +145,5 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
     if any(st.datasheet is not None for st in shown):
         panels[0].plot([], [], "--", color="tab:red", label="datasheet")
     panels[0].legend(fontsize=7)
-    fig.suptitle(f"{_TITLES[sensor]}: noise terms of {len(names)} units")
+    fig.suptitle(f"{SENSOR_TITLES[sensor]}: noise terms of {len(names)} units")
     return _png(fig)
-
-
-FigureJob = tuple[Callable[..., bytes | None], tuple]
-"""A figure function and its arguments; called as ``func(*args)`` wherever the mapper runs it."""
-
-Mapper = Callable[[Callable[[FigureJob], bytes | None], list[FigureJob]], Iterable[bytes | None]]
-"""Runs the figure jobs, e.g. builtin ``map`` (in this process) or a Dask client's map+gather
-(on the fleet's workers, in parallel)."""
-
-
-def draw(job: FigureJob) -> bytes | None:
-    """Run one figure job (picklable: the fleet's workers draw the figures)."""
-    func, args = job
-    return func(*args)
-
-
-def figure_jobs(
-    fleet: pl.DataFrame, pop: pl.DataFrame, reports: Mapping[str, dict], stats: list[TermStats]
-) -> list[tuple[str, str, FigureJob]]:
-    """(caption, file name, job) of every fleet figure: per sensor, the ADEV overlay and the
-    strip plots."""
-    jobs: list[tuple[str, str, FigureJob]] = []
-    for sensor in ("gyro", "accel"):
-        jobs.append((
-            f"{_TITLES[sensor]}: Allan deviation of every unit",
-            f"fleet_adev_{sensor}.png",
-            (adev_figure, (fleet, pop, sensor)),
-        ))  # fmt: skip
-        jobs.append((
-            f"{_TITLES[sensor]}: N, B, K per unit",
-            f"fleet_terms_{sensor}.png",
-            (terms_figure, (reports, stats, sensor)),
-        ))  # fmt: skip
-    return jobs
-
-
-def save_figures(
-    jobs: list[tuple[str, str, FigureJob]], pngs: Iterable[bytes | None], out_dir: Path
-) -> dict[str, Path]:
-    """Write the drawn figures (``pngs``, in the order of ``jobs``; None: not applicable) into
-    ``out_dir``; returns {caption: path}."""
-    written: dict[str, Path] = {}
-    for (caption, name, _), png in zip(jobs, pngs, strict=True):
-        if png is not None:
-            written[caption] = out_dir / name
-            written[caption].write_bytes(png)
-    return written

@@ -5,7 +5,7 @@
   and the effects found; the population statistics per axis and term
   (:mod:`imupipe.fleet.population`) and the population's Allan-deviation curve per axis;
 - ``fleet.parquet``: every unit's Allan curves, long form (:data:`FLEET_ALLAN_SCHEMA`);
-- ``fleet.md`` with the figures of :mod:`imupipe.fleet.figures`;
+- ``fleet.md`` with the figures of :mod:`imupipe.fleet.figures` (drawn on the workers);
 - ``fleet.rrd``: the curves per unit in Rerun (:mod:`imupipe.fleet.rerun_view`).
 """
 
@@ -16,22 +16,19 @@ import re
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import polars as pl
 
 from imupipe import __version__
 from imupipe.analysis.results import jsonable
 from imupipe.fleet.curves import fleet_frame, population_curves
+from imupipe.fleet.figure_plan import Mapper, draw, figure_jobs, save_figures
 from imupipe.fleet.population import CONFIDENCE, COVERAGE, TermStats, final_terms, population
 from imupipe.fleet.task import UnitOutcome
 from imupipe.report.datasheet import Datasheet
 from imupipe.report.report import _fmt, _md_table
 from imupipe.units import PAPER_UNIT, from_si
 from imupipe.vocab import sensor_of
-
-if TYPE_CHECKING:  # matplotlib is imported only when the figures are drawn
-    from imupipe.fleet.figures import Mapper
 
 SCHEMA_VERSION = 1
 _MD_SPECIAL = re.compile(r"([\\`*_{}\[\]<>#!~])")
@@ -252,9 +249,8 @@ def write_fleet_report(
 ) -> tuple[dict, list[TermStats]]:
     """Write fleet.json, fleet.parquet, fleet.md (+ figures) and fleet.rrd into ``out_dir``;
     returns the fleet.json document and the population statistics.  The figures are drawn by
-    ``mapper`` (:data:`imupipe.fleet.figures.Mapper`; a Dask client's map draws them on the
+    ``mapper`` (:data:`imupipe.fleet.figure_plan.Mapper`; a Dask client's map draws them on the
     fleet's workers while this process writes the rest)."""
-    from imupipe.fleet.figures import draw, figure_jobs, save_figures
     from imupipe.fleet.rerun_view import write_fleet_rrd
 
     ok = [o for o in outcomes if o.status == "ok"]

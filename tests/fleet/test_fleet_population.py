@@ -177,6 +177,26 @@ def test_md_text_escapes_markup():
     assert md_text("a|b`c`<script>\n[x](y)") == r"a|b\`c\`\<script\> \[x\](y)"
 
 
+def test_the_client_plans_the_figures_without_importing_matplotlib():
+    """The fleet's client writes the report while its workers draw the figures: importing
+    matplotlib there (~1 s) would delay the figure jobs at the end of every fleet."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, tempfile; from pathlib import Path; import imupipe.fleet.run; "
+        "from imupipe.fleet.report import write_fleet_report; "
+        "from imupipe.fleet.task import UnitOutcome; jobs = []; "
+        "u = UnitOutcome('a', 'a.mcap', 'failed', 'not MCAP', None, None, 0.1, 'h:1'); "
+        "write_fleet_report([u], Path(tempfile.mkdtemp()), rrd=False, "
+        "mapper=lambda f, js: jobs.extend(js) or [None] * len(js)); "
+        "print([name for name, _ in jobs], 'matplotlib' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split("] ")[1].strip() == "False"
+    assert out.stdout.count("adev_figure") == 2 and out.stdout.count("terms_figure") == 2
+
+
 def test_population_curve_is_the_median_and_band_of_the_units():
     tau = np.array([1.0, 10.0, 100.0])
 
