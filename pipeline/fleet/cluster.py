@@ -29,8 +29,9 @@ its deployment's settings (docs/fleets.md says which to set)."""
 
 SINGLE_THREAD_ENV = {"NUMBA_NUM_THREADS": "1", "POLARS_MAX_THREADS": "1"}
 """Set in every embedded worker process (Dask's nanny already sets OMP/MKL/OpenBLAS to one
-thread): the Allan and EDF kernels are numba ``prange`` loops and polars has its own pool, so an
-unpinned worker takes ~1.2 cores and two of them oversubscribe two cores.  One single-threaded
+thread): the Allan and EDF kernels run on up to ``NUMBA_NUM_THREADS`` threads
+(:func:`imupipe.jit.cores_here`) and polars has its own pool, so an unpinned worker takes
+~1.2 cores and two of them oversubscribe two cores.  One single-threaded
 worker per core is the fleet's unit of parallelism."""
 
 
