@@ -1,19 +1,20 @@
 """Fleet throughput: 2 Dask workers against 1, and the fleet against a plain loop of
 ``imupipe.api.analyze`` (issue 14's targets: ≥ 1.8× on 2 cores, ≤ 10 % overhead).
 
-    python benchmarks/bench_fleet.py [--units 24] [--duration 1h] [--dir /tmp/imupipe_bench_fleet]
+    python benchmarks/bench_fleet.py [--units 24] [--duration 1h] [--rounds 2] [--dir DIR]
 
 Records ``--units`` simulated recordings at 100 Hz (seeds 0..units-1, kept in ``--dir`` for the
-next run), warms the numba cache with one analysis, then times, one after the other: the
-sequential loop in this process (numba's and polars' default thread pools), the same loop in a
-child process pinned to one core as a fleet worker is (``SINGLE_THREAD_ENV``, one axis at a
-time), ``run_fleet``
-on a LocalCluster of 1 worker, and of 2 workers (each including cluster start and stop and the
-fleet report).  The fleet's overhead is measured against the one-thread loop: the same work on
+next run), warms the numba cache with one analysis, then times the sequential loop in this
+process (numba's and polars' default thread pools), and then ``--rounds`` rounds of three runs:
+the same loop in a child process pinned to one core as a fleet worker is (``SINGLE_THREAD_ENV``,
+one axis at a time), ``run_fleet`` on a LocalCluster of 1 worker, and of 2 workers (each
+including cluster start and stop and the fleet report).  Every other round runs the three in
+reverse order, so a machine whose speed drifts (shared cores) biases no ratio; the ratios are
+printed per round.  The fleet's overhead is measured against the one-thread loop: the same work on
 the same single core, without Dask and the fleet report.  All runs use imupipe analyze's
 defaults (closed loop, figures, recording.rrd).  The load average is printed with every
 timing: on a shared machine the ratios are only as good as the load was steady.  From the
-1-worker run (worker-seconds per unit) it derives what a 1,000-unit fleet of such recordings
+1-worker runs (median worker-seconds per unit) it derives what a 1,000-unit fleet of such recordings
 needs, one single-threaded worker per core.
 """
 
@@ -61,10 +62,32 @@ def _recordings(folder: Path, units: int, duration: str) -> list[Path]:
     return paths
 
 
+def _one_core_loop(work: Path, paths: list[Path]) -> float:
+    """Seconds of the sequential loop in a child pinned to one thread, as a fleet worker runs."""
+    child = subprocess.run(
+        [sys.executable, "-c", ONE_THREAD_LOOP, str(work), *map(str, paths)],
+        env=os.environ | SINGLE_THREAD_ENV, capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    return float(child.stdout.split()[-1])
+
+
+def _fleet(work: Path, paths: list[Path], workers: int) -> float:
+    """Seconds of ``run_fleet`` on a LocalCluster of ``workers`` (start, stop, report included)."""
+    t0 = time.perf_counter()
+    result = run_fleet(paths, work, workers=workers)
+    seconds = time.perf_counter() - t0
+    assert not result.failed, [u.error for u in result.failed]
+    unit_s = statistics.median(u.seconds for u in result.units)
+    print(f"  fleet, LocalCluster of {workers} worker(s): {seconds:.1f} s "
+          f"({unit_s:.2f} s per unit on its worker, median), {_load()}")  # fmt: skip
+    return seconds
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--units", type=int, default=24)
     parser.add_argument("--duration", default="1h")
+    parser.add_argument("--rounds", type=int, default=2, help="alternated rounds (see above)")
     parser.add_argument("--dir", type=Path, default=Path("/tmp/imupipe_bench_fleet"))
     args = parser.parse_args()
     print(f"cores {os.cpu_count()}, {_load()}")
@@ -87,34 +110,30 @@ def main() -> None:
         print(f"sequential loop of analyze: {t_seq:.1f} s ({statistics.median(per_unit):.2f} s "
               f"per unit, median), peak RSS {peak_gb:.2f} GB, {_load()}")  # fmt: skip
 
-        child = subprocess.run(
-            [sys.executable, "-c", ONE_THREAD_LOOP, str(work / "seq1"), *map(str, paths)],
-            env=os.environ | SINGLE_THREAD_ENV, capture_output=True, text=True, check=True,
-        )  # fmt: skip
-        t_one = float(child.stdout.split()[-1])
-        print(f"sequential loop, one thread (as a fleet worker): {t_one:.1f} s, {_load()}")
-
-        timings = {}
-        for workers in (1, 2):
-            t0 = time.perf_counter()
-            result = run_fleet(paths, work / f"fleet{workers}", workers=workers)
-            timings[workers] = time.perf_counter() - t0
-            assert not result.failed, [u.error for u in result.failed]
-            unit_s = statistics.median(u.seconds for u in result.units)
-            print(f"fleet, LocalCluster of {workers} worker(s): {timings[workers]:.1f} s "
-                  f"({unit_s:.2f} s per unit on its worker, median), {_load()}")  # fmt: skip
+        runs = {
+            "loop": lambda r: _one_core_loop(work / f"seq1_{r}", paths),
+            1: lambda r: _fleet(work / f"fleet1_{r}", paths, 1),
+            2: lambda r: _fleet(work / f"fleet2_{r}", paths, 2),
+        }
+        timings: dict[object, list[float]] = {name: [] for name in runs}
+        for r in range(args.rounds):
+            print(f"round {r + 1}:")
+            for name in list(runs) if r % 2 == 0 else list(runs)[::-1]:
+                timings[name].append(runs[name](r))
+                if name == "loop":
+                    print(f"  sequential loop, one thread (as a fleet worker): "
+                          f"{timings[name][-1]:.1f} s, {_load()}")  # fmt: skip
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
-    speedup = timings[1] / timings[2]
-    overhead = timings[1] / t_one - 1.0
-    print(f"speedup 2 vs 1 worker: {speedup:.2f}x (target >= 1.8x on 2 cores)")
-    print(
-        f"fleet (1 worker) vs one-thread sequential loop: {100 * overhead:+.1f} % "
-        f"(target <= 10 %); vs the default-threads loop: {100 * (timings[1] / t_seq - 1):+.1f} %"
-    )
-    core_s = timings[1] / len(paths)  # one worker, one recording after the other
-    print(f"per unit: {core_s:.1f} worker-seconds ({args.duration} at 100 Hz, 1-worker run)")
+    speedups = [one / two for one, two in zip(timings[1], timings[2], strict=True)]
+    overheads = [100 * (f / b - 1) for f, b in zip(timings[1], timings["loop"], strict=True)]
+    print("speedup 2 vs 1 worker, per round: "
+          + ", ".join(f"{v:.2f}x" for v in speedups) + " (target >= 1.8x on 2 cores)")  # fmt: skip
+    print("fleet (1 worker) vs one-thread sequential loop, per round: "
+          + ", ".join(f"{v:+.1f} %" for v in overheads) + " (target <= 10 %)")  # fmt: skip
+    core_s = statistics.median(timings[1]) / len(paths)  # one worker, one unit after the other
+    print(f"per unit: {core_s:.1f} worker-seconds ({args.duration} at 100 Hz, 1-worker runs)")
     for n in (16, 64, 256):
         print(f"1,000 units on {n} workers: {1000 * core_s / n / 3600:.2f} h, "
               f"~{peak_gb:.1f} GB per worker")  # fmt: skip
