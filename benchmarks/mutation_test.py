@@ -112,6 +112,8 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/model/test_loop_reuse.py",
         "tests/model/test_loop.py",
     ),
+    "pipeline/fleet/population.py": ("tests/fleet/test_fleet_population.py",),
+    "pipeline/fleet/curves.py": ("tests/fleet/test_fleet_population.py",),
     "pipeline/model/effects.py": (
         "tests/model/test_whitener.py",
         "tests/model/test_loop_rules.py",
