@@ -496,28 +496,47 @@ class CompositeFit:
         idx = self.fit_index
         x, a, nu = self.design[idx], avar[idx], self.nu(edf)
         others = np.delete(x, j, axis=1)
-        at_best = np.delete(self.coef, j)  # each profile fit starts from the fit's optimum
+        at_best = np.delete(self.coef, j)
         limit = self.dispersion * chi2_ppf_1dof(level)
+        solved: list[tuple[float, np.ndarray]] = [(float(self.coef[j]), at_best)]
 
         def excess(c: float) -> float:
-            dev = fit_nonneg_gamma(others, a, nu, c * x[:, j], at_best)[1]
+            # The profile deviance is the least over the other coefficients, and the gamma
+            # deviance is not convex in them: a fit from one start can stop on a higher branch
+            # or stall at the model's floor (deviance ~1e12), and the interval would end
+            # there, too short.  So each profile fit starts both from the fit's optimum and
+            # from the solution at the nearest c solved so far (a continuation along the
+            # profile), and the lesser deviance counts.
+            nearest = min(solved, key=lambda done: abs(done[0] - c))[1]
+            starts = (at_best,) if nearest is at_best else (at_best, nearest)
+            fits = [fit_nonneg_gamma(others, a, nu, c * x[:, j], start) for start in starts]
+            coef, dev = min(fits, key=lambda fit: fit[1])
+            solved.append((c, coef))
             return dev - self.deviance - limit
 
         best = float(self.coef[j])
+        # Each end is bracketed by walking away from the fit in steps (each fit continuing
+        # from its neighbour's solution) to the first c whose deviance rises past the limit,
+        # then solved by brentq inside that step: a far first guess, fitted from the optimum
+        # alone, can land on a higher branch and end the interval short.
         lo = 0.0
-        if best > 0 and excess(0.0) > 0:  # a coefficient at its bound 0 has lo = 0
-            lo = optimize.brentq(excess, 0.0, best, xtol=1e-6 * best, rtol=1e-6)
-        # upper end: double from the fit (or from a tiny fraction of the data's level) until
-        # the deviance rises past the limit
-        top = max(2.0 * best, 1e-6 * float(np.min(a / np.maximum(np.abs(x[:, j]), 1e-300))))
-        for _ in range(200):
-            if excess(top) > 0:
+        inner = best
+        for c in best * np.linspace(0.9, 0.0, 10) if best > 0 else ():
+            if excess(c) > 0:  # a coefficient at its bound 0 has lo = 0
+                lo = optimize.brentq(excess, c, inner, xtol=1e-6 * best, rtol=1e-6)
                 break
-            if not np.isfinite(2.0 * top):  # the data do not bound it (e.g. a null column)
-                return lo, np.inf
-            top *= 2.0
-        hi = optimize.brentq(excess, best, top, xtol=1e-6 * top, rtol=1e-6)
-        return lo, hi
+            inner = c
+        # upper end: 10 % steps up to 4x the fit (or from a tiny fraction of the data's
+        # level), doubling beyond, until the deviance rises past the limit
+        tiny = 1e-6 * float(np.min(a / np.maximum(np.abs(x[:, j]), 1e-300)))
+        inner, c = best, max(1.1 * best, tiny)
+        for _ in range(400):
+            if excess(c) > 0:
+                return lo, optimize.brentq(excess, inner, c, xtol=1e-6 * c, rtol=1e-6)
+            if not np.isfinite(2.0 * c):  # the data do not bound it (e.g. a null column)
+                break
+            inner, c = c, c * (1.1 if c < 4.0 * best else 2.0)
+        return lo, np.inf
 
 
 def cutoff_grid(tau: np.ndarray) -> np.ndarray:
