@@ -46,6 +46,18 @@ def test_order_statistics_need_93_units_at_95_95():
     assert (lo, hi, method) == (1.0, 93.0, ORDER_METHOD)
 
 
+def test_order_statistic_rank_is_the_binomial_one_for_every_n():
+    # the coverage of (X(r), X(n+1-r)) is at least p with probability P(Bin(n, p) <= n - 2r)
+    # (Hahn & Meeker 1991, §5.3): the largest r with that >= 95 %, computed independently
+    from scipy import stats
+
+    for n in (93, 130, 153, 200, 311, 500):
+        r = np.arange(1, n // 2 + 1)
+        ok = r[stats.binom.cdf(n - 2 * r, n, 0.95) >= 0.95]
+        assert order_statistic_rank(n) == int(ok[-1]), n
+    assert order_statistic_rank(153) == 2 and order_statistic_rank(500) == 8
+
+
 def test_small_population_uses_howe_on_log_values():
     values = [1.0, 2.0, 4.0]  # log10 mean log10(2), sd log10(2)
     (lo, hi), method = tolerance_interval(values)
@@ -74,9 +86,18 @@ def test_outlier_is_a_unit_whose_interval_misses_the_others_tolerance_interval()
 
 
 def test_robust_spread_is_scaled_mad_over_median():
-    stats = term_stats("gyro_x", "random_walk", "u", _units([1.0, 2.0, 3.0, 4.0, 10.0]))
-    assert stats.median == 3.0
-    assert stats.robust_spread == pytest.approx(1.4826 * 1.0 / 3.0)
+    stats = term_stats("gyro_x", "random_walk", "u", _units([2.0, 2.6, 3.0, 3.5, 10.0]))
+    assert stats.median == 3.0  # absolute deviations 1, 0.4, 0, 0.5, 7: MAD 0.5
+    assert stats.robust_spread == pytest.approx(1.4826 * 0.5 / 3.0)
+
+
+def test_an_outlier_needs_three_other_units():
+    # two others give Howe's k of 37.7: with fewer than three the unit is never tested
+    far = UnitTerm("far", 1e3, 0.99e3, 1.01e3)
+    two = [*_units([1.0, 1.1]), far]
+    assert term_stats("gyro_x", "random_walk", "u", two).outliers == ()
+    three = [*_units([1.0, 1.1, 1.05]), far]
+    assert term_stats("gyro_x", "random_walk", "u", three).outliers == ("far",)
 
 
 def _sheet(tmp_path, body):
@@ -140,6 +161,12 @@ def test_population_uses_terms_after_the_loop():
     rw = next(s for s in stats if s.term == "random_walk")
     assert rw.median == 4.0 and rw.axis == "gyro_x"
     assert next(s for s in stats if s.term == "quantization").median == 1.0
+    # axes no unit has (a one-axis recording: gyro_x only, or accel_z only) are skipped
+    accel_z = {"a": {"axes": {"accel_z": doc(1.0, 3.0)["axes"]["gyro_x"]}}}
+    assert {(s.axis, s.term) for s in population(accel_z)} == {
+        ("accel_z", t) for t in ("quantization", "random_walk", "bias_instability",
+                                 "rate_random_walk", "rate_ramp")
+    }  # fmt: skip
 
 
 def test_discover_files_bags_folders_globs(tmp_path):
@@ -223,6 +250,9 @@ def test_population_curve_is_the_median_and_band_of_the_units():
     longer = curve(1.0).with_columns(pl.col("tau") * 10)
     pop = population_curves(fleet_frame({"a": longer, "b": curve(2.0), "c": curve(4.0)}))
     assert pop["tau"].max() == pytest.approx(100.0)
+    # ... but one of two units is half of them: "at least half" keeps it
+    pop = population_curves(fleet_frame({"a": longer, "b": curve(2.0)}))
+    assert pop["tau"].max() == pytest.approx(1000.0) and pop["units"][-1] == 1
 
 
 def test_worker_memory_caps_the_analysis_budget():
