@@ -200,3 +200,67 @@ def test_a_malformed_message_outside_chunks_is_skipped_and_the_next_ones_read(
     rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=extra))
     assert rec.frames.height == 3005
     assert list(rec.warnings) == ["skipped 1 unreadable message record(s)"]
+
+
+def _channel_record(channel_id: int, topic: str) -> bytes:
+    """A well-formed Channel record (MCAP spec: id u16, schema_id u16, topic, encoding, an
+    empty metadata map)."""
+    import struct
+
+    from mcap.records import Opcode
+
+    from imupipe.testing import hostile_mcap as hm
+
+    text = b"".join(struct.pack("<I", len(s)) + s for s in (topic.encode(), b"cdr"))
+    return hm.record(Opcode.CHANNEL, struct.pack("<HH", channel_id, 1) + text + b"\0\0\0\0")
+
+
+def test_a_chunk_may_end_with_a_channel_record(tmp_path: Path) -> None:
+    """A record that ends exactly at the chunk's end is whole: the five messages before it
+    are read and nothing is reported lost."""
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    records = hm.imu_message_records(1, 5) + _channel_record(7, "/other")
+    rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=(hm.chunk(records),)))
+    assert rec.frames.height == 3005
+    assert list(rec.warnings) == []
+
+
+def test_a_record_running_past_its_chunk_stops_the_chunk_with_a_warning(tmp_path: Path) -> None:
+    """A Channel record whose length runs past the chunk's end is not parsed: the messages
+    before it are kept and the rest of the chunk is reported lost, with the byte it starts at."""
+    import struct
+
+    from mcap.records import Opcode
+
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    messages = hm.imu_message_records(1, 5)
+    records = messages + struct.pack("<BQ", Opcode.CHANNEL, 10_000) + bytes(40)
+    rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=(hm.chunk(records),)))
+    assert rec.frames.height == 3005
+    assert len(rec.warnings) == 1
+    assert f"malformed record at byte {len(messages)} of the chunk" in rec.warnings[0]
+
+
+def test_a_chunk_inside_a_chunk_between_messages_is_counted_and_the_walk_goes_on(
+    tmp_path: Path,
+) -> None:
+    """A nested chunk after a chunk's first messages is counted, never unpacked, and the
+    messages after it are read: neither taken for a malformed record nor for a Channel."""
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    inner = hm.chunk(hm.imu_message_records(1, 50), "none")
+    records = hm.imu_message_records(1, 5) + inner + hm.imu_message_records(1, 7)
+    rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=(hm.chunk(records),)))
+    assert rec.frames.height == 3012
+    assert list(rec.warnings) == ["skipped 1 unreadable nested chunk record(s)"]
+    # a private record (opcodes 0x80-0xFF: readers ignore them, MCAP spec) is no nested chunk
+    private = hm.record(0x80, b"vendor data")
+    records = hm.imu_message_records(1, 5) + private + hm.imu_message_records(1, 7)
+    rec = decode(hm.imu_file(tmp_path / "y.mcap", extra=(hm.chunk(records),)))
+    assert rec.frames.height == 3012
+    assert list(rec.warnings) == []
