@@ -264,3 +264,21 @@ def test_a_chunk_inside_a_chunk_between_messages_is_counted_and_the_walk_goes_on
     rec = decode(hm.imu_file(tmp_path / "y.mcap", extra=(hm.chunk(records),)))
     assert rec.frames.height == 3012
     assert list(rec.warnings) == []
+
+
+def test_a_tiny_memory_budget_still_reads_chunks_up_to_64_mib(tmp_path: Path) -> None:
+    """A chunk of up to 64 MiB is always inflated (writers make ~1 MB chunks; a tiny budget
+    asks for the low-memory path, not for refusing data); a larger one under a tiny budget is
+    skipped unread, with a warning naming its size.  Above 1 GiB of budget, 1/16 of it."""
+    from imupipe.io.decode import decode
+    from imupipe.io.mcap_scan import chunk_limit
+    from imupipe.testing import hostile_mcap as hm
+
+    limit = chunk_limit(0)
+    assert limit == 64 << 20 == chunk_limit(16 * (64 << 20))
+    assert chunk_limit(16 * (65 << 20)) == 65 << 20
+    extra = (hm.bomb_chunk(limit), hm.bomb_chunk(limit + 1))
+    rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=extra), max_chunk_bytes=limit)
+    assert rec.frames.height == 3000
+    skipped = [w for w in rec.warnings if "skipped unread" in w]
+    assert len(skipped) == 1 and f"it declares {limit + 1} bytes uncompressed" in skipped[0]
