@@ -509,16 +509,18 @@ class CompositeFit:
             # profile), and the lesser deviance counts.
             nearest = min(solved, key=lambda done: abs(done[0] - c))[1]
             starts = (at_best,) if nearest is at_best else (at_best, nearest)
-            fits = [fit_nonneg_gamma(others, a, nu, c * x[:, j], start) for start in starts]
-            coef, dev = min(fits, key=lambda fit: fit[1])
+            offset = c * x[:, j]
+            coef, dev = min(
+                (fit_nonneg_gamma(others, a, nu, offset, start) for start in starts),
+                key=lambda fit: fit[1],
+            )
             solved.append((c, coef))
             return dev - self.deviance - limit
 
         best = float(self.coef[j])
-        # Each end is bracketed by walking away from the fit in steps (each fit continuing
-        # from its neighbour's solution) to the first c whose deviance rises past the limit,
-        # then solved by brentq inside that step: a far first guess, fitted from the optimum
-        # alone, can land on a higher branch and end the interval short.
+        # Each end is bracketed by walking away from the fit in steps, so that every fit has
+        # a near neighbour to continue from, up to the first c past the limit; brentq then
+        # solves inside that step.
         lo = 0.0
         inner = best
         for c in best * np.linspace(0.9, 0.0, 10) if best > 0 else ():
