@@ -5,17 +5,21 @@
 
 Records ``--units`` simulated recordings at 100 Hz (seeds 0..units-1, kept in ``--dir`` for the
 next run), warms the numba cache with one analysis, then times the sequential loop in this
-process (numba's and polars' default thread pools), and then ``--rounds`` rounds of three runs:
-the same loop in a child process pinned to one core as a fleet worker is (``SINGLE_THREAD_ENV``,
-one axis at a time), ``run_fleet`` on a LocalCluster of 1 worker, and of 2 workers (each
-including cluster start and stop and the fleet report).  Every other round runs the three in
-reverse order, so a machine whose speed drifts (shared cores) biases no ratio; the ratios are
-printed per round.  The fleet's overhead is measured against the one-thread loop: the same work on
-the same single core, without Dask and the fleet report.  All runs use imupipe analyze's
-defaults (closed loop, figures, recording.rrd).  The load average is printed with every
-timing: on a shared machine the ratios are only as good as the load was steady.  From the
-1-worker runs (median worker-seconds per unit) it derives what a 1,000-unit fleet of such recordings
-needs, one single-threaded worker per core.
+process (numba's and polars' default thread pools), and then ``--rounds`` rounds of four runs:
+a loop of the ``imupipe analyze`` command (one process per recording, ``--jobs 1``, one
+thread: what a user runs without a fleet, each process paying its start, imports and numba
+cache loading), the sequential loop in one child process pinned to one core as a fleet worker
+is (``SINGLE_THREAD_ENV``, one axis at a time), ``run_fleet`` on a LocalCluster of 1 worker,
+and of 2 workers (each including cluster start and stop and the fleet report).  Every other
+round runs the four in reverse order, so a machine whose speed drifts (shared cores) biases no
+ratio; the ratios are printed per round.  The fleet's overhead is measured against the
+one-thread loop in one process — the same work on the same single core, without Dask, the
+fleet report or any process start: the strict baseline — and against the loop of commands,
+the issue's literal baseline.  All runs use imupipe analyze's defaults (closed loop, figures,
+recording.rrd).  The load average is printed with every timing: on a shared machine the ratios
+are only as good as the load was steady.  From the 1-worker runs (median worker-seconds per
+unit) it derives what a 1,000-unit fleet of such recordings needs, one single-threaded worker
+per core.
 """
 
 from __future__ import annotations
@@ -71,6 +75,21 @@ def _one_core_loop(work: Path, paths: list[Path]) -> float:
     return float(child.stdout.split()[-1])
 
 
+def _command_loop(work: Path, paths: list[Path]) -> float:
+    """Seconds of a shell-style loop of the ``imupipe analyze`` command, one process per
+    recording pinned to one thread (``--jobs 1``, ``SINGLE_THREAD_ENV``): what a user runs
+    without a fleet, each process paying its own start, imports and numba cache loading."""
+    command = Path(sys.executable).with_name("imupipe")
+    t0 = time.perf_counter()
+    for k, path in enumerate(paths):
+        subprocess.run(
+            [str(command), "analyze", str(path), "--out", str(work / str(k)), "--jobs", "1",
+             "--quiet"],
+            env=os.environ | SINGLE_THREAD_ENV, capture_output=True, check=True,
+        )  # fmt: skip
+    return time.perf_counter() - t0
+
+
 def _fleet(work: Path, paths: list[Path], workers: int) -> float:
     """Seconds of ``run_fleet`` on a LocalCluster of ``workers`` (start, stop, report included)."""
     t0 = time.perf_counter()
@@ -111,6 +130,7 @@ def main() -> None:
               f"per unit, median), peak RSS {peak_gb:.2f} GB, {_load()}")  # fmt: skip
 
         runs = {
+            "command": lambda r: _command_loop(work / f"cmd_{r}", paths),
             "loop": lambda r: _one_core_loop(work / f"seq1_{r}", paths),
             1: lambda r: _fleet(work / f"fleet1_{r}", paths, 1),
             2: lambda r: _fleet(work / f"fleet2_{r}", paths, 2),
@@ -123,6 +143,9 @@ def main() -> None:
                 if name == "loop":
                     print(f"  sequential loop, one thread (as a fleet worker): "
                           f"{timings[name][-1]:.1f} s, {_load()}")  # fmt: skip
+                if name == "command":
+                    print(f"  loop of the imupipe analyze command, one thread: "
+                          f"{timings[name][-1]:.1f} s, {_load()}")  # fmt: skip
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
@@ -132,6 +155,9 @@ def main() -> None:
           + ", ".join(f"{v:.2f}x" for v in speedups) + " (target >= 1.8x on 2 cores)")  # fmt: skip
     print("fleet (1 worker) vs one-thread sequential loop, per round: "
           + ", ".join(f"{v:+.1f} %" for v in overheads) + " (target <= 10 %)")  # fmt: skip
+    commands = [100 * (f / b - 1) for f, b in zip(timings[1], timings["command"], strict=True)]
+    print("fleet (1 worker) vs the loop of imupipe analyze commands, per round: "
+          + ", ".join(f"{v:+.1f} %" for v in commands))  # fmt: skip
     core_s = statistics.median(timings[1]) / len(paths)  # one worker, one unit after the other
     print(f"per unit: {core_s:.1f} worker-seconds ({args.duration} at 100 Hz, 1-worker runs)")
     for n in (16, 64, 256):

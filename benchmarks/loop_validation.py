@@ -13,7 +13,10 @@ scored against the generator's truth:
 * error before/after: the Allan-space error (gamma deviance / dof, ``report.json`` model
   ``error_before``/``error_after``) on the effect's axis, and the time-domain error (whitened
   residual, ``time_domain_error_before``/``after``) beside it;
-* N and B after the loop against the truth on every analysed axis.
+* N and B after the loop against the truth on every analysed axis: within 2 % / 15 %, and
+  whether the reported 95 % interval holds the truth (for an unresolved B: the truth at most
+  its 95 % upper bound) — the honesty of the intervals, which a short record cannot make
+  narrow but must keep right.
 
 This is a measurement, not a test (not run in CI).  A small panel runs in minutes on 2 cores::
 
@@ -65,9 +68,19 @@ def _found(axis: dict, name: str, events: list[dict]) -> list[str]:
     return kinds + (["outliers"] if axis.get("outliers") else []) + (["R term"] * resolved_r)
 
 
-def _terms(axis: dict) -> tuple[float | None, float | None]:
+def _terms(axis: dict) -> tuple[dict, dict]:
+    """The final model's N and B entries of report.json (value, lo, hi, unit, reason)."""
     terms = axis.get("ieee952_after") or axis["ieee952"]
-    return terms["random_walk"]["value"], terms["bias_instability"]["value"]
+    return terms["random_walk"], terms["bias_instability"]
+
+
+def _covers(term: dict, truth: float) -> bool:
+    """The truth inside the term's 95 % interval [lo, hi], or, for a term the data do not
+    resolve (value None), at most its 95 % upper bound hi."""
+    lo, hi = term.get("lo"), term.get("hi")
+    if term["value"] is None:
+        return hi is not None and truth <= hi
+    return lo is not None and hi is not None and lo <= truth <= hi
 
 
 def run_one(job: dict) -> dict:
@@ -105,13 +118,15 @@ def run_one(job: dict) -> dict:
         row["time_error_after"] = model.get("time_domain_error_after")
         row["p_after"] = model.get("p_value_after")
     row["events"] = events
-    n_err, b_err = {}, {}
+    n_err, b_err, n_cov, b_cov = {}, {}, {}, {}
     for a, ax in result["axes"].items():
-        n_hat, b_hat = _terms(ax)
+        n_term, b_term = _terms(ax)
         true = truth.noise[a]
-        n_err[a] = None if n_hat is None else n_hat / true.n - 1
-        b_err[a] = None if b_hat is None else b_hat / true.b - 1
+        n_err[a] = None if n_term["value"] is None else n_term["value"] / true.n - 1
+        b_err[a] = None if b_term["value"] is None else b_term["value"] / true.b - 1
+        n_cov[a], b_cov[a] = _covers(n_term, true.n), _covers(b_term, true.b)
     row["n_rel_error"], row["b_rel_error"] = n_err, b_err
+    row["n_covered"], row["b_covered"] = n_cov, b_cov
     if effect:
         axis = result["axes"].get(effect["axis"], {})
         terms = axis.get("ieee952_after") or axis.get("ieee952") or {}
@@ -149,13 +164,18 @@ def _within(errors: list[float | None], limit: float) -> list[bool]:
     return [e is not None and abs(e) <= limit for e in errors]
 
 
+def _covered(rows: list[dict], key: str) -> list[bool]:
+    """Every axis' coverage flag of ``key`` (rows written before it was scored: none)."""
+    return [c for r in rows for c in r.get(key, {}).values()]
+
+
 def table(rows: list[dict]) -> str:
     """The issue's table: one line per effect kind × size, and one for clean recordings."""
     head = (
         "| effect | size | n | detected | right kind, right axis | false-effect axes | "
         "error before → after (median) | N within 2 % | B within 15 % | B not resolved | "
-        "found as |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "N in its 95 % interval | B in its interval or under its bound | found as |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     groups: dict[tuple, list[dict]] = {}
@@ -183,7 +203,8 @@ def table(rows: list[dict]) -> str:
         lines.append(
             f"| {kind} | {size:g} | {len(rs)} | {det} | {right} | {_pct(false)} | {err} | "
             f"{_pct(_within(n_errs, 0.02))} | {_pct(_within(b_errs, 0.15))} | "
-            f"{_pct([e is None for e in b_errs])} | {found_as or '-'} |"
+            f"{_pct([e is None for e in b_errs])} | {_pct(_covered(rs, 'n_covered'))} | "
+            f"{_pct(_covered(rs, 'b_covered'))} | {found_as or '-'} |"
         )
     return head + "\n".join(lines)
 

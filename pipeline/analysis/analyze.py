@@ -445,7 +445,7 @@ def compile_kernels(loop: bool = True) -> None:
     )
     robust.median_positive(np.cumsum(white), differences=True)
     robust.mad(np.cumsum(white), differences=True)
-    robust.running_median(white.reshape(-1, 2), 16)  # the event detector's local level
+    robust.running_median(white.reshape(-1, 2), 16, 2)  # the event detector's local levels
 
 
 def load_kernels(loop: bool) -> None:

@@ -178,55 +178,74 @@ def abs_quantile(x: np.ndarray, p: float) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
-def _running_median(x: np.ndarray, half: int) -> np.ndarray:  # pragma: no cover (JIT)
-    """Columns of :func:`running_median`: a sorted window of 2·half + 1 values, slid by one
-    binary-search deletion and one insertion per row.  The first window is built by insertion
-    too (numba's ``sort`` would add ~2 s of compiling to a first run)."""
+def _running_median(x: np.ndarray, half: int, gap: int) -> np.ndarray:  # pragma: no cover (JIT)
+    """Columns of :func:`running_median`: a sorted window of the rows at offsets
+    ``gap`` ≤ |o| ≤ ``half`` (every |o| ≤ half when ``gap`` is 0), slid row by row: one entry
+    replaced on each side (one in all when ``gap`` is 0) by a binary search for the old value
+    and a shift of the entries between it and the new value's place.  The first window is
+    built by insertion, and binary searches are written out (numba's ``sort`` and
+    ``np.searchsorted`` would add ~3 s of compiling to a first run)."""
     rows, cols = x.shape
-    width = 2 * half + 1
+    width = 2 * half + 1 if gap == 0 else 2 * (half - gap + 1)
     out = np.empty((rows, cols))
     window = np.empty(width)
     for c in range(cols):
-        for j in range(width):  # rows −half … half, clamped to the edges, inserted in order
-            v = x[min(max(j - half, 0), rows - 1), c]
+        j = 0
+        for o in range(-half, half + 1):  # the first row's window, clamped to the edges
+            if gap > 0 and abs(o) < gap:
+                continue
+            v = x[min(max(o, 0), rows - 1), c]
             k = j
-            while k > 0 and window[k - 1] > v:
+            while k > 0 and window[k - 1] > v:  # inserted in order
                 window[k] = window[k - 1]
                 k -= 1
             window[k] = v
-        out[0, c] = window[half]
+            j += 1
+        out[0, c] = 0.5 * (window[(width - 1) // 2] + window[width // 2])
         for i in range(1, rows):
-            old = x[max(i - 1 - half, 0), c]
-            new = x[min(i + half, rows - 1), c]
-            lo, hi = 0, width  # binary search for an entry equal to old (np.searchsorted's
-            while lo < hi:  # left end: its compiling would cost ~1 s on a first run)
-                mid = (lo + hi) // 2
-                if window[mid] < old:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            k = lo
-            if new >= old:  # shift the entries between up to new's place down by one
-                while k + 1 < width and window[k + 1] < new:
-                    window[k] = window[k + 1]
-                    k += 1
-            else:  # shift those between new's place and old up by one
-                while k > 0 and window[k - 1] > new:
-                    window[k] = window[k - 1]
-                    k -= 1
-            window[k] = new
-            out[i, c] = window[half]
+            for side in range(1 if gap == 0 else 2):
+                if gap == 0:  # row i − 1 − half leaves, row i + half enters
+                    old, new = x[max(i - 1 - half, 0), c], x[min(i + half, rows - 1), c]
+                elif side == 0:  # the left side gains row i − gap
+                    old, new = x[max(i - 1 - half, 0), c], x[max(i - gap, 0), c]
+                else:  # the right side loses row i − 1 + gap
+                    old, new = x[min(i - 1 + gap, rows - 1), c], x[min(i + half, rows - 1), c]
+                lo, hi = 0, width  # the left end of old's run of equal entries
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if window[mid] < old:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                k = lo
+                if new >= old:  # shift the entries between up to new's place down by one
+                    while k + 1 < width and window[k + 1] < new:
+                        window[k] = window[k + 1]
+                        k += 1
+                else:  # shift those between new's place and old up by one
+                    while k > 0 and window[k - 1] > new:
+                        window[k] = window[k - 1]
+                        k -= 1
+                window[k] = new
+            out[i, c] = 0.5 * (window[(width - 1) // 2] + window[width // 2])
     return out
 
 
-def running_median(x: np.ndarray, half: int) -> np.ndarray:
+def running_median(x: np.ndarray, half: int, gap: int = 0) -> np.ndarray:
     """Median of rows i − ``half`` … i + ``half`` of each column of ``x`` (rows, cols), the
     edge rows repeated beyond the ends: ``scipy.ndimage.median_filter(x, size=(2 half + 1, 1),
     mode="nearest")`` bit for bit (an odd window's median is one of its values) for finite
-    ``x``, in O(rows · half) with small constants instead of a selection per row."""
+    ``x``, in O(rows · half) with small constants instead of a selection per row.
+
+    ``gap`` > 0 leaves out the rows within ``gap`` − 1 of row i (row i itself at least): the
+    median of the 2 (half − gap + 1) rows at gap ≤ |i − k| ≤ half, the mean of the two middle
+    values.  The event detector scales its z by the residual against it: a level that shares
+    no row with the window it is compared with (:mod:`imupipe.analysis.events`)."""
     x = kernel_input(x, np.float64)
     if x.ndim != 2 or not np.isfinite(x).all():
         raise ValueError("running_median: a finite 2-D array")
+    if not 0 <= gap <= half:
+        raise ValueError("running_median: 0 <= gap <= half")
     if x.shape[0] == 0:
         return np.empty(x.shape)
-    return _running_median(x, half)
+    return _running_median(x, half, gap)

@@ -80,6 +80,35 @@ def test_running_median_equals_scipys_median_filter(rows, cols, half, values):
     assert got.shape == x.shape and np.array_equal(got, expected)
 
 
+@pytest.mark.parametrize("gap", [1, 2, 5, 16])
+@pytest.mark.parametrize("values", ["normal", "quantised"])
+def test_running_median_with_a_gap_is_the_median_of_the_rows_outside_it(gap, values):
+    x = RNG.standard_normal((3000, 2))
+    if values == "quantised":
+        x = np.round(x * 2) / 2
+    padded = np.pad(x, ((16, 16), (0, 0)), mode="edge")  # the edge rows repeated
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 33, axis=0)
+    expected = np.median(windows[:, :, np.abs(np.arange(-16, 17)) >= gap], axis=2)
+    assert np.array_equal(running_median(x, 16, gap), expected)
+
+
+def test_running_median_with_a_gap_never_sees_the_centre_rows():
+    x = np.zeros((41, 1))
+    x[19:22] = 100.0  # row 20 and its two neighbours
+    assert running_median(x, 5, 2)[20, 0] == 0.0  # rows 15-18 and 22-25 only
+    assert running_median(x, 1, 1)[20, 0] == 100.0  # rows 19 and 21: only row 20 left out
+    assert running_median(x, 1, 0)[20, 0] == 100.0
+    x[17:19] = 40.0  # rows 17, 18, 22, 23: 40, 40, 0, 0, an even count: the middle two's mean
+    assert running_median(x, 3, 2)[20, 0] == 20.0
+    x[40] = 7.0  # the last row, repeated beyond the end: rows 37-38 and 42-43 -> 0, 0, 7, 7
+    assert running_median(x, 3, 2)[40, 0] == 3.5
+
+
+def test_running_median_refuses_a_gap_wider_than_its_window():
+    with pytest.raises(ValueError, match="gap"):
+        running_median(np.zeros((10, 1)), 3, 4)
+
+
 def test_running_median_follows_a_level_step_and_ignores_a_spike():
     x = np.concatenate([np.zeros(50), np.full(50, 4.0)])[:, None]
     x[20] = 100.0
