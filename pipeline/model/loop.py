@@ -61,7 +61,7 @@ DELTA_BIC = 10.0  # AVAR-term candidates
 ALPHA = 1e-3  # family-wise level of each time-domain candidate (Bonferroni over options)
 N_SEGMENTS = 16  # interleaved hold-out segments for time-domain corrections
 MAX_ROUNDS = 6
-RAMP_K_LEVEL = 0.68  # K of the ramp test's whitener: upper end of this profile interval
+RAMP_K_LEVEL = 0.68  # K of the slow effects' whitener: upper end of this profile interval
 N_BOOT = 200
 AVAR_ONLY = frozenset({"sinusoid", "narrowband", "prefilter"})
 """AVAR terms whose acceptance the time-domain error does not judge (reported only).  The
@@ -69,6 +69,10 @@ prefilter is outside its model; lines are in it since session 7 (a sinusoid proj
 the whitened series, a spread line in :func:`noise_psd`) — before, a modelled line stayed in the
 series and that error rose (a 3e-4 rad/s sinusoid at 0.02 Hz: 1.11 → 1.72).  Judging lines on
 it too is not done: it would change the loop's decisions, which were validated without it."""
+SLOW_KINDS = frozenset({"ramp", "bias_step", "rate_ramp"})
+"""Time-domain effects as slow as a random walk's wander over the record (a ramp, a step, a
+warm-up drift): their GLS test is whitened with K at the upper end of its :data:`RAMP_K_LEVEL`
+interval (:func:`_whitener`)."""
 RAMP_KINDS = frozenset({"ramp"})
 """Corrections neither error can show: a linear rate ramp is the time-domain error's nuisance
 (projected out) and the Allan model's R term (measured: a 1.1e-7 rad/s² ramp on 1.4 h, GLS
@@ -872,19 +876,26 @@ def noise_psd(fit: ieee952.CompositeFit, shapes: Shapes) -> effects.NoisePsd:
 
 def _whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis, kind: str) -> effects.Whitener:
     """The GLS whitener of a time-domain candidate of ``kind`` (masked blocks left out): the
-    fitted PSD, or, for the ramp test, the fitted PSD with the rate random walk at the upper end
-    of its :data:`RAMP_K_LEVEL` profile interval.
+    fitted PSD, or, for the slow effects (:data:`SLOW_KINDS`: ramp, bias step, warm-up), the
+    fitted PSD with the rate random walk at the upper end of its :data:`RAMP_K_LEVEL` profile
+    interval.  The candidate is refined with the whitener of the model refitted after its
+    correction: a real step or drift raises the long-τ curve and so K's bound, and its
+    correction lowers it again; a random walk's wander, "corrected", leaves K's bound where it
+    was, and stays insignificant.
 
-    A random walk's wander over the record looks like a trend; with K underestimated
-    (unresolved, or soaked into B) the GLS would read that wander as a ramp — measured: false
-    ramps on clean axes of the independent generator, whose axes all carry K.  At 95 % the
+    A random walk's wander over the record looks like a trend, a step or a warm-up; with K
+    underestimated (unresolved, or soaked into B) the GLS would read that wander as one —
+    measured: false ramps on clean axes of the independent generator, whose axes all carry K;
+    and (session 13) on 10 clean 8–12 h recordings, with only the ramp so whitened, false
+    warm-ups and steps on 4 (e.g. recording 1300006 gyro_x: a 0.25 mrad/s warm-up, τ 3378 s,
+    K 6.8e-7 rad/s²/√Hz unresolved; ``tests/model/test_loop_slow_effects.py``).  At 95 % the
     bound hid a 12 B ramp (which inflates K's bound).  The same bound for every candidate of a
     masked record (whose Allan curve stops at half the longest clean run, so K is loosely
     bounded while the GLS spans the record) removed a false step but hid 2 of 4 bias steps of
     10× the noise behind ten 30 s gaps (a step raises the long-τ curve, and so K's bound): not
     done (docs/gaps_and_outliers.md)."""
     psd = noise_psd(fit, state.effect_parameters)
-    if kind == "ramp":
+    if kind in SLOW_KINDS:
         j = fit.names.index("rate_random_walk")
         k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
         k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: fitted K
