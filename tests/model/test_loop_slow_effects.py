@@ -49,6 +49,14 @@ def test_an_unresolved_random_walk_is_not_read_as_a_warm_up(wander) -> None:
     assert result.terms.random_walk.value == pytest.approx(truth.n, rel=0.002)
 
 
+def test_an_unresolved_random_walk_is_not_read_as_a_bias_step(wander) -> None:
+    """The same noise, another draw of 11 h (seed 209): whitened with the fitted K, the loop
+    accepted a bias step there."""
+    _, truth = wander
+    y = gen.axis_noise(truth, round(11 * 3600 / TAU0), TAU0, np.random.default_rng(209))
+    assert analysed(y).loop.accepted == []
+
+
 def test_a_real_step_on_the_same_wander_is_still_found(wander) -> None:
     y, truth = wander
     t_step = 0.55 * len(y) * TAU0
