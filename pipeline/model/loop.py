@@ -61,7 +61,7 @@ DELTA_BIC = 10.0  # AVAR-term candidates
 ALPHA = 1e-3  # family-wise level of each time-domain candidate (Bonferroni over options)
 N_SEGMENTS = 16  # interleaved hold-out segments for time-domain corrections
 MAX_ROUNDS = 6
-RAMP_K_LEVEL = 0.68  # K of the slow effects' whitener: upper end of this profile interval
+SLOW_K_LEVEL = 0.68  # K of the slow effects' whitener: upper end of this profile interval
 N_BOOT = 200
 AVAR_ONLY = frozenset({"sinusoid", "narrowband", "prefilter"})
 """AVAR terms whose acceptance the time-domain error does not judge (reported only).  The
@@ -71,7 +71,7 @@ series and that error rose (a 3e-4 rad/s sinusoid at 0.02 Hz: 1.11 → 1.72).  J
 it too is not done: it would change the loop's decisions, which were validated without it."""
 SLOW_KINDS = frozenset({"ramp", "bias_step", "rate_ramp"})
 """Time-domain effects as slow as a random walk's wander over the record (a ramp, a step, a
-warm-up drift): their GLS test is whitened with K at the upper end of its :data:`RAMP_K_LEVEL`
+warm-up drift): their GLS test is whitened with K at the upper end of its :data:`SLOW_K_LEVEL`
 interval (:func:`_whitener`)."""
 RAMP_KINDS = frozenset({"ramp"})
 """Corrections neither error can show: a linear rate ramp is the time-domain error's nuisance
@@ -877,7 +877,7 @@ def noise_psd(fit: ieee952.CompositeFit, shapes: Shapes) -> effects.NoisePsd:
 def _whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis, kind: str) -> effects.Whitener:
     """The GLS whitener of a time-domain candidate of ``kind`` (masked blocks left out): the
     fitted PSD, or, for the slow effects (:data:`SLOW_KINDS`: ramp, bias step, warm-up), the
-    fitted PSD with the rate random walk at the upper end of its :data:`RAMP_K_LEVEL` profile
+    fitted PSD with the rate random walk at the upper end of its :data:`SLOW_K_LEVEL` profile
     interval.  The candidate is refined with the whitener of the model refitted after its
     correction: a real step or drift raises the long-τ curve and so K's bound, and its
     correction lowers it again; a random walk's wander, "corrected", leaves K's bound where it
@@ -900,7 +900,7 @@ def _whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis, kind: str) ->
     psd = noise_psd(fit, state.effect_parameters)
     if kind in SLOW_KINDS:
         j = fit.names.index("rate_random_walk")
-        k2_hi = fit.profile_interval(state.avar, ax.edf, j, RAMP_K_LEVEL)[1]
+        k2_hi = fit.profile_interval(state.avar, ax.edf, j, SLOW_K_LEVEL)[1]
         k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: fitted K
         psd = replace(psd, rrw=k2)
     return effects.Whitener(psd, len(state.y_d), ax.dt, ax.masked_d)
