@@ -164,7 +164,7 @@ def axis_result(
         mean=float(y.mean(where=usable) if usable is not None else y.mean()),
         rms=float(y.std(where=usable) if usable is not None else y.std()),
         curve=published,
-        terms=fit_noise_terms(curve, sensor) if looped is None else looped.terms_after,
+        terms=fit_noise_terms(curve, sensor, tau0_s) if looped is None else looped.terms_after,
         loop=None if looped is None else looped.up_to(len(published.tau_s)),
         outliers=outliers,
     )

@@ -45,7 +45,7 @@ def compile_late_kernels(loop: bool) -> None:
     n_terms = np.round(1e4 / tau).astype(np.int64)
     alpha = np.zeros(tau.size, np.int64)
     curve = AllanCurve(tau, adev, 0.9 * adev, 1.1 * adev, n_terms / 2.0, n_terms, alpha, 0.683)
-    ieee952.fit_noise_terms(curve, "gyro")
+    ieee952.fit_noise_terms(curve, "gyro", 0.01)
     if loop:
         white = np.random.default_rng(0).standard_normal(4096)
         effects.Whitener(effects.NoisePsd(1.0, 0.0, np.inf, 0.0), white.size, 0.01)

@@ -285,6 +285,7 @@ class _State:
             ax.fit_note,
             ax.avar_hi(self.avar),
             {k: self.effect_parameters[k] for k in self.columns},
+            (ax.sig.tau0, ax.n_terms),
         )
 
 
@@ -367,6 +368,7 @@ class _Axis:
         self.tau = np.asarray(curve.tau_s, dtype=float)
         self.edf = ieee952.monotone_edf(curve.edf)
         self.avar = np.asarray(curve.adev, dtype=float) ** 2
+        self.n_terms = np.asarray(curve.n_terms)
         self.hi_ratio = ieee952.avar_upper(1.0, self.edf)
         self.dense_from = ieee952.long_tau_start(curve)
         self.tau_min, self.fit_note = ieee952.fit_start(  # as fit_noise_terms: B possible

@@ -44,7 +44,8 @@ def test_fit_on_exact_model_recovers_terms():
         quantization=1e-5, random_walk=8.7e-4, bias_instability=1.4e-4, rate_random_walk=2e-6
     )
     avar = ieee952.avar_model(tau, **truth)
-    terms = ieee952.fit_noise_terms(allan_like(tau, np.sqrt(avar), np.full_like(tau, 1e4)), "gyro")
+    curve = allan_like(tau, np.sqrt(avar), np.full_like(tau, 1e4))
+    terms = ieee952.fit_noise_terms(curve, "gyro", 0.01)
     for name, value in truth.items():
         assert getattr(terms, name).value == pytest.approx(value, rel=1e-3)
         assert getattr(terms, name).lo < value < getattr(terms, name).hi
@@ -68,19 +69,25 @@ def allan_like(tau, adev, edf):
     return _Minimal(tau, adev, edf, np.full(len(tau), 10**6))
 
 
-def test_interval_coverage_over_seeds(synth_rate, paper_gyro):
-    """True N and B inside the 95 % interval at about the nominal rate (≥ 16 of 20 seeds)."""
-    tau0, n = 0.01, 2**18
-    m = tau_factors(n)
-    hits_n = hits_b = 0
-    for seed in range(20):
+def test_intervals_cover_the_truth_at_their_nominal_rate(synth_rate, paper_gyro):
+    """50 records of 22 min of the paper's gyro noise, fitted on T/2 curves as the analysis
+    fits: the truth lies outside N's 95 % interval on 3 and outside B's (or above its bound)
+    on none; B is resolved on 14.  With the fitted τ points counted as independent (their AVAR
+    estimates are correlated, :mod:`imupipe.stats.avar_covariance`) N missed on 9 and B on 8
+    (session 14, ``sampling=None``)."""
+    tau0, n = 0.01, 2**17
+    m = tau_factors(n, min_terms=2)
+    miss_n = miss_b = resolved_b = 0
+    for seed in range(50):
         y = synth_rate(n, tau0, np.random.default_rng(seed), paper_gyro.n, paper_gyro.b)
-        terms = ieee952.fit_noise_terms(allan_curves(y, tau0, m)[0], "gyro")
+        terms = ieee952.fit_noise_terms(allan_curves(y, tau0, m)[0], "gyro", tau0)
         rw, bi = terms.random_walk, terms.bias_instability
-        hits_n += rw.value is not None and rw.lo <= paper_gyro.n <= rw.hi
-        hits_b += bi.value is not None and bi.lo <= paper_gyro.b <= bi.hi
-    assert hits_n >= 16
-    assert hits_b >= 16
+        miss_n += not rw.lo <= paper_gyro.n <= rw.hi
+        miss_b += not (bi.lo or 0.0) <= paper_gyro.b <= bi.hi
+        resolved_b += bi.value is not None
+    assert miss_n <= 5
+    assert miss_b <= 4
+    assert resolved_b >= 10
 
 
 def test_short_white_record_leaves_rrw_unresolved(synth_rate, paper_gyro):
@@ -92,7 +99,7 @@ def test_short_white_record_leaves_rrw_unresolved(synth_rate, paper_gyro):
     tau0, n = 0.01, 2**16
     y = synth_rate(n, tau0, np.random.default_rng(7), paper_gyro.n)
     curve = allan_curves(y, tau0)[0]
-    terms = ieee952.fit_noise_terms(curve, "gyro")
+    terms = ieee952.fit_noise_terms(curve, "gyro", tau0)
     assert terms.random_walk.lo < paper_gyro.n < terms.random_walk.hi
     k = terms.rate_random_walk
     assert k.value is None and k.lo is None
@@ -132,7 +139,8 @@ def test_prefilter_term_exact_and_fit_starts_where_it_holds():
     c = 3 * tau0**2 * np.sum(np.arange(1, len(r)) * r[1:])
     np.testing.assert_allclose(avar[m >= 4], n2 / tau[m >= 4] - c / tau[m >= 4] ** 2, rtol=1e-12)
     assert not np.allclose(avar[m == 2], n2 / tau[m == 2] - c / tau[m == 2] ** 2, rtol=1e-3)
-    terms = ieee952.fit_noise_terms(allan_like(tau, np.sqrt(avar), np.full_like(tau, 1e5)), "gyro")
+    curve = allan_like(tau, np.sqrt(avar), np.full_like(tau, 1e5))
+    terms = ieee952.fit_noise_terms(curve, "gyro", tau0)
     assert terms.fit_tau_min_s == pytest.approx(4 * tau0)
     assert "tau = 0.01, 0.02 s left out" in terms.fit_note
     assert terms.random_walk.value == pytest.approx(np.sqrt(n2), rel=1e-4)
@@ -165,7 +173,7 @@ def test_prefiltered_quantised_sensor_resolves_b_and_k(seed, synth_rate):
     y = adis_like(synth_rate, n, tau0, np.random.default_rng(seed), n_white, b_true, k_true)
     assert 30 < len(np.unique(y)) < 100
     assert np.corrcoef(y[:-1], y[1:])[0, 1] > 0.5
-    terms = ieee952.fit_noise_terms(allan_curves(y, tau0, tau_factors(n))[0], "gyro")
+    terms = ieee952.fit_noise_terms(allan_curves(y, tau0, tau_factors(n))[0], "gyro", tau0)
     bi, rrw, rw = terms.bias_instability, terms.rate_random_walk, terms.random_walk
     assert bi.value is not None and bi.lo <= b_true <= bi.hi
     assert rrw.value is not None and rrw.lo <= k_true <= rrw.hi
@@ -270,14 +278,21 @@ def test_fit_noise_terms_is_fit_start_then_fit_composite(synth_rate, paper_gyro)
     tau0, n = 0.01, 2**16
     y = synth_rate(n, tau0, np.random.default_rng(11), paper_gyro.n, paper_gyro.b)
     curve = allan_curves(y, tau0)[0]
-    terms = ieee952.fit_noise_terms(curve, "gyro")
+    terms = ieee952.fit_noise_terms(curve, "gyro", tau0)
     avar, tau = np.asarray(curve.adev) ** 2, np.asarray(curve.tau_s)
     edf = ieee952.monotone_edf(curve.edf)
     avar_hi = ieee952.avar_upper(avar, edf)
     limit = ieee952.flicker_limit(avar_hi)
     tau_min, note = ieee952.fit_start(tau, avar, edf, flicker_max=limit)
     fit = ieee952.fit_composite(tau, avar, edf, tau_min=tau_min, prefilter=True, flicker_max=limit)
-    assert terms == ieee952.terms_from_fit(fit, avar, edf, "gyro", note, avar_hi)
+    sampling = (tau0, curve.n_terms)
+    assert terms == ieee952.terms_from_fit(fit, avar, edf, "gyro", note, avar_hi, sampling=sampling)
+    independent = ieee952.terms_from_fit(fit, avar, edf, "gyro", note, avar_hi)
+    # the correlated τ points widen N's interval (c ≈ 1.9 in deviance, √c in width), not K's
+    width = terms.random_walk.hi - terms.random_walk.lo
+    naive = independent.random_walk.hi - independent.random_walk.lo
+    assert width / naive == pytest.approx(1.397, abs=0.002)
+    assert terms.rate_random_walk == independent.rate_random_walk
 
 
 CHI2_1DOF_95 = 3.841458820694124  # χ²₁ 95 % quantile (NIST/SEMATECH table: 3.841)

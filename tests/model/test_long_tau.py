@@ -71,7 +71,7 @@ def test_an_unresolved_rate_random_walk_bound_covers_the_truth(synth_rate):
     k_true = 0.664 * 0.0013239 * np.sqrt(3 / (n * tau0 / 2))
     y = synth_rate(n, tau0, np.random.default_rng(16), 0.0027459, 0.0013239, k_true)
     curve = allan_curves(y, tau0, tau_factors(n, min_terms=FIT_MIN_TERMS))[0]
-    k = ieee952.fit_noise_terms(curve, "accel").rate_random_walk
+    k = ieee952.fit_noise_terms(curve, "accel", tau0).rate_random_walk
     assert k.value is None
     assert k.hi / k_true == pytest.approx(1.374, abs=0.002)
 
@@ -104,9 +104,9 @@ def test_every_tau_from_t8_is_fitted_only_on_a_curve_beyond_t4(paper_gyro):
 @pytest.mark.parametrize("seed", [501, 506])
 def test_a_ramp_of_size_three_is_resolved_up_to_t2_not_at_t4(seed, paper_gyro):
     y, slope = ramped(seed, paper_gyro)
-    at_t4 = ieee952.fit_noise_terms(allan_curves(y, TAU0)[0], "gyro").rate_ramp
+    at_t4 = ieee952.fit_noise_terms(allan_curves(y, TAU0)[0], "gyro", TAU0).rate_ramp
     curve = allan_curves(y, TAU0, tau_factors(N, min_terms=FIT_MIN_TERMS))[0]
-    at_t2 = ieee952.fit_noise_terms(curve, "gyro").rate_ramp
+    at_t2 = ieee952.fit_noise_terms(curve, "gyro", TAU0).rate_ramp
     assert at_t4.value is None and at_t4.hi > slope
     assert at_t2.value is not None and at_t2.lo < slope < at_t2.hi
     assert at_t2.hi < at_t4.hi  # the points from T/4 to T/2 bound R more tightly
@@ -115,7 +115,7 @@ def test_a_ramp_of_size_three_is_resolved_up_to_t2_not_at_t4(seed, paper_gyro):
 def test_a_clean_record_gets_no_ramp_from_the_long_taus(paper_gyro):
     y = paper_gyro.rate(N, TAU0, np.random.default_rng(500))
     curve = allan_curves(y, TAU0, tau_factors(N, min_terms=FIT_MIN_TERMS))[0]
-    assert ieee952.fit_noise_terms(curve, "gyro").rate_ramp.value is None
+    assert ieee952.fit_noise_terms(curve, "gyro", TAU0).rate_ramp.value is None
 
 
 def test_the_loops_goodness_names_its_fitted_range_beyond_the_published_curve(paper_gyro):
