@@ -19,7 +19,8 @@ squares, on octave-spaced τ (neighbouring overlapping-AVAR points are strongly 
 dense grid would over-count the evidence) — and on a curve beyond T/4 on every τ of its last
 two octaves, where the long-τ terms live and each point's small edf keeps its weight small
 (:func:`fit_index`).  Intervals are profile-likelihood intervals
-(ΔD ≤ φ·χ²₁(0.95), quasi-likelihood dispersion φ = max(1, D/dof)).
+(ΔD ≤ φ·c·χ²₁(0.95), quasi-likelihood dispersion φ = max(1, D/dof), c the sandwich factor of
+the fitted points' correlation for :data:`CORRELATED_TERMS` and the effects, else 1).
 
 Short τ and the sensor's prefilter.  A rate series with autocovariance r(k) = 0 for k ≥ L (white
 noise through an L-tap FIR such as the ADIS Bartlett filter, then sampled) has, for m ≥ L − 1,
