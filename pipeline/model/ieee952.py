@@ -504,7 +504,7 @@ class CompositeFit:
         divided by c_j is again ~ χ²₁ (the moment-matched adjustment of the independence
         likelihood: Rotnitzky & Jewell 1990; Chandler & Bate 2007, Biometrika 94(1) §3.4).
         H and J are taken on the fit's positive coefficients and ``j``; 1 when H is
-        singular."""
+        singular (or so ill-conditioned that c is not a positive number)."""
         idx = self.fit_index
         active = self.coef > 0
         active[j] = True
@@ -520,8 +520,8 @@ class CompositeFit:
             naive = np.linalg.inv(fisher)
         except np.linalg.LinAlgError:
             return 1.0
-        robust = naive @ score_var @ naive
-        return float(robust[k, k] / naive[k, k]) if naive[k, k] > 0 else 1.0
+        factor = float((naive @ score_var @ naive)[k, k] / naive[k, k])
+        return factor if np.isfinite(factor) and factor > 0 else 1.0
 
     def profile_interval(
         self,

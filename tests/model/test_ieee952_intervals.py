@@ -329,3 +329,30 @@ def test_profile_of_a_sinusoid_column_follows_its_lowest_branch() -> None:
     assert ieee952.fit_nonneg_gamma(others, avar, nu, offset, near_best)[1] == pytest.approx(
         fit.deviance, rel=1e-9
     )
+
+
+def test_sandwich_factor_is_one_for_independent_points_and_grows_with_correlation() -> None:
+    """c_j = (H⁻¹JH⁻¹)_jj/(H⁻¹)_jj: exactly 1 when the fitted points are independent (J = H,
+    every evidence weight 1); with the correlation 0.5 between neighbouring octaves of white
+    noise and 0.18 two apart, N's variance is ~1.9 times what independence says, so its
+    interval's deviance limit is multiplied by that (written-out fit: N² and B² columns on
+    octave τ, model N = 1e-3)."""
+    tau = 0.01 * 2.0 ** np.arange(12)
+    edf = 1e5 / 2.0 ** np.arange(12)
+    avar = 1e-6 / tau
+    fit = ieee952.fit_composite(tau, avar, edf, prefilter=True)
+    n_idx = fit.fit_index.size
+    assert n_idx == 12 and fit.coef[1] == pytest.approx(1e-6, rel=1e-9)
+    for j in range(5):
+        assert fit.sandwich_factor(edf, np.eye(n_idx), j) == pytest.approx(1.0, rel=1e-9)
+    rho = np.eye(n_idx) + 0.5 * (np.eye(n_idx, k=1) + np.eye(n_idx, k=-1))
+    rho += 0.18 * (np.eye(n_idx, k=2) + np.eye(n_idx, k=-2))
+    c = fit.sandwich_factor(edf, rho, 1)
+    # N² alone is fitted (the other coefficients are 0) and u_i = x_i/μ_i = 1e6 at every τ:
+    # c = Σ_ik √(ν_i ν_k) ρ_ik / Σ_i ν_i
+    assert c == pytest.approx(np.sqrt(np.outer(edf, edf)).ravel() @ rho.ravel() / edf.sum())
+    assert c == pytest.approx(1.8868, abs=1e-4)
+    lo, hi = fit.profile_interval(avar, edf, 1)
+    lo_c, hi_c = fit.profile_interval(avar, edf, 1, correlation=rho)
+    # the profile of N² is a gamma deviance, nearly quadratic so close to the fit: √c wider
+    assert (hi_c - lo_c) / (hi - lo) == pytest.approx(np.sqrt(c), rel=0.01)
