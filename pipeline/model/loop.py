@@ -524,7 +524,11 @@ def _best(fits: list[tuple[tuple, ieee952.CompositeFit]]) -> tuple[tuple, ieee95
 
 
 def _column_profile(
-    kind: str, fits: list[tuple[tuple, ieee952.CompositeFit]], avar: np.ndarray, edf: np.ndarray
+    kind: str,
+    fits: list[tuple[tuple, ieee952.CompositeFit]],
+    avar: np.ndarray,
+    edf: np.ndarray,
+    sampling: tuple[float, np.ndarray],
 ) -> dict[str, list[float]]:
     """95 % profile intervals of an AVAR column's value and of its numeric shape parameters
     over the searched ``fits`` (sinusoid: amplitude only, its frequency is the periodogram's).
@@ -535,17 +539,24 @@ def _column_profile(
     φ χ²₁(0.95) − ΔD (the :data:`PROFILE_SHAPES` shapes of most room) — not conditional on the
     best shape, which the value is strongly correlated with.  A shape parameter's interval:
     where its own profile (min of ΔD/φ over the others) crosses χ²₁(0.95)
-    (:func:`effects.grid_interval`).
+    (:func:`effects.grid_interval`).  Deviances are read in units of φ·c, c the best fit's
+    :meth:`ieee952.CompositeFit.sandwich_factor` for the value under the correlation of the
+    fitted τ points (``sampling`` = (τ0 s, terms per τ); :func:`ieee952.fit_correlation`, of
+    the best fit: every fit here reads the same τ), as the final model's effect terms are.
     """
     dev = np.array([f.deviance for _, f in fits])
-    phi = _best(fits)[1].dispersion
+    best = _best(fits)[1]
+    rho = ieee952.fit_correlation(best, *sampling)
+    phi = best.dispersion * best.sandwich_factor(edf, rho, best.names.index("_new"))
     room = CHI2_95 - (dev - dev.min()) / phi
     bounds = []
     inside = np.flatnonzero(room >= 0)
     for j in inside[np.argsort(-room[inside])][:PROFILE_SHAPES]:
         fit = fits[j][1]
-        level = float(special.gammainc(0.5, room[j] * phi / fit.dispersion / 2))  # chi2.cdf
-        bounds.append(fit.profile_interval(avar, edf, fit.names.index("_new"), max(level, 1e-9)))
+        new = fit.names.index("_new")
+        scale = fit.dispersion * fit.sandwich_factor(edf, rho, new)
+        level = float(special.gammainc(0.5, room[j] * phi / scale / 2))  # chi2.cdf
+        bounds.append(fit.profile_interval(avar, edf, new, max(level, 1e-9), correlation=rho))
     lo, hi = np.sqrt(np.min(bounds)), np.sqrt(np.max(bounds))
     value = {"gauss_markov": "sigma", "narrowband": "rms", "sinusoid": "amplitude"}
     out = {value.get(kind, "white_filtered"): [float(lo), float(hi)]}
@@ -1012,7 +1023,9 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         dbic, flags_ok = _judge(kind, fit_named, fit, good, k, tau, state.avar, edf)
         cand.evidence["avar_delta_bic"] = dbic
         if dbic >= DELTA_BIC:  # costly: significant ones only
-            cand.intervals |= _column_profile(kind, fits, state.avar, edf)
+            cand.intervals |= _column_profile(
+                kind, fits, state.avar, edf, (ax.sig.tau0, ax.n_terms)
+            )
             cand.evidence |= _spectrum_view(ax, state, cand)
         holdout = partial(_holdout_column, ax, state, cand)
         change = errors(fit_named, new_state, kind)
@@ -1078,7 +1091,9 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
                             state.avar, edf)  # fmt: skip
     cand.evidence |= {"avar_delta_bic": dbic, "fit_start_s": [ax.tau_min, tau_min]}
     if dbic >= DELTA_BIC:
-        cand.intervals |= _column_profile("narrowband", fits, state.avar, edf)
+        cand.intervals |= _column_profile(
+            "narrowband", fits, state.avar, edf, (ax.sig.tau0, ax.n_terms)
+        )
         cand.evidence |= _spectrum_view(ax, state, cand)
     holdout = partial(_holdout_column, wide, state, cand)
     key = f"{name} below the fit start"  # its own record next to the in-range line's

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from imupipe.model import ieee952
 from imupipe.model.effects import CHI2_95
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
 from imupipe.stats.allan import allan_curves
@@ -84,3 +85,23 @@ def test_a_strong_temperature_coupling_is_found_not_a_crash(paper_gyro):
     assert [e.kind for e in res.accepted][:1] == ["temperature"]
     lo, hi = res.accepted[0].intervals["coefficient"]
     assert lo < k_true < hi
+
+
+def test_an_effects_interval_counts_the_correlated_tau_points(base, monkeypatch):
+    """The accepted sinusoid's amplitude interval (report.json's effect record) is read with
+    the fitted τ points' correlation, as the final model's effect term is: wider than with the
+    points counted as independent (the correlation replaced by the identity here)."""
+    _rng, y = base(11)
+    t = np.arange(N) * TAU0
+    y = y + 3e-3 * np.sin(2 * np.pi * 0.02 * t + 0.3)
+    res = run(y)
+    (lo, hi), final = res.accepted[0].intervals["amplitude"], res.terms_after.effects[0]
+    monkeypatch.setattr(
+        ieee952, "fit_correlation", lambda fit, tau0, n_terms: np.eye(fit.fit_index.size)
+    )
+    res = run(y)
+    (lo_i, hi_i), final_i = res.accepted[0].intervals["amplitude"], res.terms_after.effects[0]
+    # c ≈ 2.05 for the amplitude² here: √c = 1.43 in width, in both places
+    assert (hi - lo) / (hi_i - lo_i) == pytest.approx(1.431, abs=0.01)
+    assert (final.hi - final.lo) / (final_i.hi - final_i.lo) == pytest.approx(1.430, abs=0.01)
+    assert lo < 3e-3 < hi and final.lo < 3e-3 < final.hi
