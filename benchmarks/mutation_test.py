@@ -53,6 +53,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     "pipeline/vocab.py": ("tests/test_units.py", "tests/test_import_floors.py"),
     "pipeline/stats/allan.py": ("tests/stats/test_allan_mutants.py", "tests/stats/test_allan.py"),
     "pipeline/stats/edf.py": ("tests/stats/test_edf_mutants.py", "tests/stats/test_edf.py"),
+    "pipeline/stats/avar_covariance.py": ("tests/stats/test_avar_covariance.py",),
     "pipeline/pages.py": ("tests/test_pages.py",),
     "pipeline/model/spectral_line.py": ("tests/model/test_spectral_line.py",),
     "pipeline/stats/robust.py": (
