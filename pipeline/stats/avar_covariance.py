@@ -172,4 +172,6 @@ def avar_correlation(
     s = np.empty((len(m), len(m)))
     s[i, j] = s[j, i] = lag_sums(m[i], m[j], terms[i], terms[j], tau0, coef)
     d = np.sqrt(np.diag(s))
+    if not np.all(d > 0):  # no noise (every coefficient 0): nothing correlates the estimates
+        return np.eye(len(m))
     return s / np.outer(d, d)

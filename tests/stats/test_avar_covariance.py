@@ -102,3 +102,8 @@ def test_correlations_are_those_of_the_noise(noise):
         )
     assert np.max(np.abs(computed - empirical)) < 0.08
     assert np.allclose(np.diag(computed), 1.0) and np.allclose(computed, computed.T)
+
+
+def test_no_noise_correlates_nothing():
+    m = np.array([1, 2, 4])
+    assert np.array_equal(avar_correlation(m, 100 - 2 * m, TAU0, (0, 0, 0, 0)), np.eye(3))
