@@ -17,6 +17,7 @@ import pytest
 from scipy import integrate
 
 from imupipe.model import ieee952
+from imupipe.stats.avar_covariance import avar_correlation
 from imupipe.vocab import chi2_ppf_1dof
 
 CHI2_1_95 = 3.841458820694124  # χ²₁ 95 % quantile (Abramowitz & Stegun 26.8: 3.841)
@@ -356,3 +357,37 @@ def test_sandwich_factor_is_one_for_independent_points_and_grows_with_correlatio
     lo_c, hi_c = fit.profile_interval(avar, edf, 1, correlation=rho)
     # the profile of N² is a gamma deviance, nearly quadratic so close to the fit: √c wider
     assert (hi_c - lo_c) / (hi - lo) == pytest.approx(np.sqrt(c), rel=0.01)
+
+
+def test_fit_correlation_is_that_of_the_fitted_noise_at_the_fitted_factors() -> None:
+    """The correlation a fit's intervals use: its own Q², N², B², K² at the factors m of its
+    fitted τ (τ/τ0 rounded: 0.03 / 0.01 is 2.9999999999999996), Q² only when the 1/τ² column
+    is quantisation (+1), not the prefilter's negative correlation (−1)."""
+    tau0 = 0.01
+    m = np.array([1, 2, 3, 6, 7, 12, 24, 48, 96, 192, 384, 768])
+    tau = tau0 * m
+    truth = dict(quantization=2e-4, random_walk=1e-3, bias_instability=1e-4)
+    avar = ieee952.avar_model(tau, **truth)
+    fit = ieee952.fit_composite(tau, avar, np.full(tau.size, 1e4), cutoff_hz=np.inf)
+    assert fit.short_sign == 1 and np.all(fit.coef[:3] > 0)
+    n_terms = 100_001 - 2 * m
+    idx = fit.fit_index
+    q2, n2, b2, k2 = fit.coef[:4]
+    want = avar_correlation(m[idx], n_terms[idx], tau0, (q2, n2, b2, k2))
+    assert np.array_equal(ieee952.fit_correlation(fit, tau0, n_terms), want)
+    prefiltered = dataclasses.replace(fit, short_sign=-1)
+    want = avar_correlation(m[idx], n_terms[idx], tau0, (0.0, n2, b2, k2))
+    assert np.array_equal(ieee952.fit_correlation(prefiltered, tau0, n_terms), want)
+
+
+def test_sandwich_factor_of_a_singular_fit_is_one() -> None:
+    """Two identical columns in the fit: H cannot be inverted, and the interval is left as the
+    independent points give it (c = 1)."""
+    tau = 0.01 * 2.0 ** np.arange(10)
+    edf = 1e5 / 2.0 ** np.arange(10)
+    fit = ieee952.fit_composite(tau, 1e-6 / tau, edf, cutoff_hz=np.inf)
+    design = fit.design.copy()
+    design[:, 4] = design[:, 1]  # R's column made N's, and R given a value
+    twin = dataclasses.replace(fit, design=design, coef=fit.coef + np.array([0, 0, 0, 0, 1e-7]))
+    rho = np.full((10, 10), 0.5) + 0.5 * np.eye(10)
+    assert twin.sandwich_factor(edf, rho, 1) == 1.0
