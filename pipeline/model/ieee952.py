@@ -943,9 +943,11 @@ def terms_from_fit(
     confidence bound at every τ; an upper bound (of an unresolved term, or of an interval) is
     then never one whose asymptote lies above it (:func:`asymptote_caps`).  Extra columns of
     ``fit`` become :class:`EffectTerm` s: ``effect_parameters[name]`` = (kind, shape parameters
-    of :func:`effect_shape`).  ``sampling`` = (τ0 s, the curve's terms per τ): every interval
-    then accounts for the correlation of the fitted τ points (:func:`fit_correlation`,
-    :meth:`CompositeFit.sandwich_factor`); without it they are counted as independent.
+    of :func:`effect_shape`).  ``sampling`` = (τ0 s, the curve's terms per τ): the intervals of
+    :data:`CORRELATED_TERMS` and of the effects then account for the correlation of the fitted
+    τ points (:func:`fit_correlation`, :meth:`CompositeFit.sandwich_factor`); without it, and
+    for K and R always, the points are counted as independent (K, R: with their evidence
+    weights).
     """
     rho = None if sampling is None else fit_correlation(fit, *sampling)
     tau_lo, tau_hi = fit.tau_range
