@@ -65,11 +65,11 @@ def test_rate_random_walk_lag_sum_where_it_is_not_zero():
 
 
 def flicker(rng, n):
-    """Flicker rate noise, B = 1 (two-sided PSD 1/(2πf)), synthesised 8× longer and cut."""
-    f = np.fft.rfftfreq(8 * n, TAU0)
+    """Flicker rate noise, B = 1 (two-sided PSD 1/(2πf)), synthesised 4× longer and cut."""
+    f = np.fft.rfftfreq(4 * n, TAU0)
     shape = np.zeros_like(f)
     shape[1:] = np.sqrt(1 / (2 * np.pi * f[1:]) / TAU0)
-    return np.fft.irfft(np.fft.rfft(rng.standard_normal(8 * n)) * shape, 8 * n)[:n]
+    return np.fft.irfft(np.fft.rfft(rng.standard_normal(4 * n)) * shape, 4 * n)[:n]
 
 
 NOISES = {
