@@ -49,16 +49,8 @@ def coverage(records: int, samples: int, n_white: float, b_flicker: float) -> No
     for seed in range(records):
         curve = allan_curves(rate(samples, np.random.default_rng(seed), n_white, b_flicker),
                              TAU0, m)[0]  # fmt: skip
-        avar, edf = curve.adev**2, ieee952.monotone_edf(curve.edf)
-        avar_hi = ieee952.avar_upper(avar, edf)
-        fit, note = ieee952._start_fit(
-            curve.tau_s, avar, edf, None, 0.999, True, ieee952.flicker_limit(avar_hi),
-            ieee952.long_tau_start(curve),
-        )  # fmt: skip
         for correlated in (False, True):
-            sampling = (TAU0, curve.n_terms) if correlated else None
-            terms = ieee952.terms_from_fit(fit, avar, edf, "gyro", note, avar_hi,
-                                           sampling=sampling)  # fmt: skip
+            terms = ieee952.fit_noise_terms(curve, "gyro", TAU0, correlated)
             for k, (term, truth) in enumerate(
                 ((terms.random_walk, n_white), (terms.bias_instability, b_flicker))
             ):

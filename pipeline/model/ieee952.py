@@ -1033,7 +1033,7 @@ def monotone_edf(edf: np.ndarray) -> np.ndarray:
 
 
 def fit_noise_terms(
-    curve: AllanCurve, sensor: Literal["gyro", "accel"], tau0_s: float
+    curve: AllanCurve, sensor: Literal["gyro", "accel"], tau0_s: float, correlated: bool = True
 ) -> NoiseTerms:
     """IEEE 952 terms of one axis from its Allan curve of samples every ``tau0_s`` s (SI rate
     units, see module doc).
@@ -1041,7 +1041,9 @@ def fit_noise_terms(
     Weights from :func:`monotone_edf`; the fit starts at the τ chosen by :func:`fit_start`
     (reported in ``fit_tau_min_s`` and ``fit_note``); B is kept possible
     (:func:`flicker_limit`) and every upper bound below the measured curve's 95 % upper bound
-    (:func:`asymptote_caps`); the intervals account for the correlation of the fitted τ.
+    (:func:`asymptote_caps`); the intervals account for the correlation of the fitted τ
+    (``correlated=False``: counted as independent, as before session 14 — for comparisons,
+    ``benchmarks/interval_coverage.py``).
     """
     avar = np.asarray(curve.adev, dtype=float) ** 2
     tau = np.asarray(curve.tau_s, dtype=float)
@@ -1050,5 +1052,5 @@ def fit_noise_terms(
     fit, note = _start_fit(
         tau, avar, edf, None, 0.999, True, flicker_limit(avar_hi), long_tau_start(curve)
     )
-    sampling = (tau0_s, np.asarray(curve.n_terms))
+    sampling = (tau0_s, np.asarray(curve.n_terms)) if correlated else None
     return terms_from_fit(fit, avar, edf, sensor, note, avar_hi, sampling=sampling)

@@ -26,8 +26,8 @@ E d_h² = Σ s_a s_b G(·) = 2 τ² AVAR(τ)):
 
 The neighbouring estimates of a τ grid share most of their samples, so they are strongly
 correlated (m and 2m: ρ ≈ 0.5 for white rate noise, 0.7 for flicker, 0.9 for a random
-walk); a fit that counts them as independent
-over-counts its evidence (:func:`imupipe.model.ieee952.CompositeFit.sandwich_factor`).
+walk); a fit that counts them as independent over-counts its evidence
+(:func:`imupipe.model.ieee952.CompositeFit.sandwich_factor`).
 """
 
 from __future__ import annotations

@@ -74,7 +74,7 @@ def test_intervals_cover_the_truth_at_their_nominal_rate(synth_rate, paper_gyro)
     fits: the truth lies outside N's 95 % interval on 4 (nominal 3) and outside B's (or above
     its bound) on 1.  With the fitted τ points counted as independent (their AVAR estimates are
     correlated, :mod:`imupipe.stats.avar_covariance`) N missed on 12 and B on 7 (session 14,
-    ``sampling=None``)."""
+    ``correlated=False``)."""
     tau0, n = 0.01, 2**16
     m = tau_factors(n, min_terms=2)
     miss_n = miss_b = 0
@@ -286,6 +286,7 @@ def test_fit_noise_terms_is_fit_start_then_fit_composite(synth_rate, paper_gyro)
     sampling = (tau0, curve.n_terms)
     assert terms == ieee952.terms_from_fit(fit, avar, edf, "gyro", note, avar_hi, sampling=sampling)
     independent = ieee952.terms_from_fit(fit, avar, edf, "gyro", note, avar_hi)
+    assert ieee952.fit_noise_terms(curve, "gyro", tau0, correlated=False) == independent
     # the correlated τ points widen N's interval (c ≈ 1.9 in deviance, √c in width), not K's
     width = terms.random_walk.hi - terms.random_walk.lo
     naive = independent.random_walk.hi - independent.random_walk.lo
