@@ -9,18 +9,27 @@ the sandwich factor); prints the share of records whose truth lies below ``lo`` 
 
 ``precision``: for a 12 h / 100 Hz record of N, B, K, the spread of the fit's N, B and K
 (its sandwich variance, linearised at the truth, on the points it reads) against the best
-linear unbiased estimate from every τ of the curve with their full covariance (GLS).
+linear unbiased estimate from every τ of the curve with their full covariance (GLS) and the
+Cramér–Rao bound of any unbiased estimator from the record itself (:func:`whittle_crb`).
+
+``panel``: for every axis of a ``loop_validation.py --jsonl`` file, the chance that an
+efficient unbiased estimate of B (spread at the Cramér–Rao bound, Gaussian) lies within 15 %
+of the truth, summed over the panel, against the measured count.
 
     python benchmarks/interval_coverage.py coverage --records 200 --samples 262144
     python benchmarks/interval_coverage.py coverage --records 40 --samples 4320000 --b 0
     python benchmarks/interval_coverage.py precision
+    python benchmarks/interval_coverage.py panel long_clean.jsonl
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
 from imupipe.model import ieee952
 from imupipe.stats.allan import allan_curves, tau_factors
@@ -65,31 +74,99 @@ def coverage(records: int, samples: int, n_white: float, b_flicker: float) -> No
         )
 
 
-def precision(hours: float = 12.0) -> None:
-    """Spread (%) of N, B, K: the fit's (sandwich, linearised at the truth) against GLS."""
-    n = int(hours * 3600 / TAU0)
+def whittle_crb(
+    n_white: float, b_flicker: float, k_rrw: float, q_angle: float, seconds: float, tau0: float
+) -> np.ndarray:
+    """Relative spread (σ/value) of N, B, K, Q at the Cramér–Rao bound of a record of
+    ``seconds`` sampled every ``tau0`` s, from the Whittle approximation of its likelihood.
+
+    Each periodogram ordinate at f_k = k/T (k = 1 … n/2) is S(f_k) × χ²₂/2 with the two-sided
+    rate PSD S = N² + B²/(2πf) + K²/(2πf)² + Q² τ0 (2 sin(πfτ0)/τ0)² (IEEE 952 Annex C; the
+    last, white angle noise differenced), so the Fisher information of θ_i = ln c_i² is
+    I_ij = Σ_k d_i d_j with d_i = c_i² g_i(f_k)/S(f_k) (Whittle 1953; Percival & Walden,
+    Spectral Analysis for Physical Applications, §6.6); σ(c_i)/c_i = √(I⁻¹)_ii / 2 (NaN for a
+    term that is zero, left out of the model).
+    """
+    f = np.arange(1, int(seconds / tau0) // 2 + 1) / seconds
+    w = 2 * np.pi * f
+    parts = np.stack([
+        np.full_like(f, n_white**2), b_flicker**2 / w, (k_rrw / w) ** 2,
+        q_angle**2 * tau0 * (2 * np.sin(np.pi * f * tau0) / tau0) ** 2,
+    ])  # fmt: skip
+    present = np.array([n_white, b_flicker, k_rrw, q_angle]) > 0
+    share = parts[present] / parts.sum(axis=0)
+    spread = np.full(4, np.nan)  # a term that is absent: not estimated
+    spread[present] = np.sqrt(np.diag(np.linalg.inv(share @ share.T))) / 2
+    return spread
+
+
+def panel(path: Path, within: float = 0.15) -> None:
+    """Expected share of a validation panel's axes with B within ``within`` of the truth for
+    an unbiased Gaussian estimate with the spread of the Cramér–Rao bound and with the GLS's
+    (:func:`allan_spreads`), against the measured share."""
+    expected = np.zeros(2)
+    measured = axes = 0
+    for line in path.read_text().splitlines():
+        rec = json.loads(line)
+        truth = rec["truth"]
+        seconds, tau0 = truth["hours"] * 3600, 1 / truth["rate_hz"]
+        for axis, c in truth["noise"].items():
+            bound = whittle_crb(c["n"], c["b"], c["k"], c["q"], seconds, tau0)[1]
+            gls = allan_spreads((c["q"], c["n"], c["b"], c["k"]), seconds, tau0)[1][2]
+            expected += 2 * stats.norm.cdf(within / np.array([bound, gls])) - 1
+            error = rec["b_rel_error"].get(axis)
+            measured += error is not None and abs(error) < within
+            axes += 1
+    print(f"B within {within:.0%} of the truth: measured {measured}/{axes} "
+          f"({measured / axes:.0%}); expected at the Cramér-Rao bound (Whittle) "
+          f"{expected[0]:.1f} ({expected[0] / axes:.0%}), with the GLS of every tau "
+          f"{expected[1]:.1f} ({expected[1] / axes:.0%})")  # fmt: skip
+
+
+def allan_spreads(
+    coef: tuple[float, float, float, float], seconds: float, tau0: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Relative spread of Q, N, B, K (``coef``, NaN where zero) from the Allan curve of a record
+    of ``seconds``: the fit's (its sandwich variance on the points it reads, linearised at the
+    truth) and the GLS's (every τ with the full covariance of :mod:`imupipe.stats.avar_covariance`:
+    the best linear unbiased reading of the curve)."""
+    n = int(seconds / tau0)
     m = tau_factors(n, min_terms=2)
-    terms, tau = n + 1 - 2 * m, m * TAU0
+    terms, tau = n + 1 - 2 * m, m * tau0
+    coef2 = np.square(coef)
+    present = coef2 > 0
     i, j = np.triu_indices(len(m))
+    sums = np.empty((len(m), len(m)))
+    sums[i, j] = sums[j, i] = lag_sums(m[i], m[j], terms[i], terms[j], tau0, tuple(coef2))
+    scale = 2 * m**2 * tau0**2 * terms  # â(m) = Σ d² / scale
+    cov = 2 * sums / np.outer(scale, scale)
+    x = ieee952.design_columns(tau)[:, :4][:, present]
+    mu = x @ coef2[present]
+    dense = tau[-1] / 4
+    idx = ieee952.fit_index(tau, 0, dense)
+    nu = 2 * mu[idx] ** 2 / np.diag(cov)[idx] * ieee952.evidence_weights(tau, idx, dense)
+    score = x[idx].T * (nu / (2 * mu[idx] ** 2))
+    fisher_inv = np.linalg.inv(score @ x[idx])
+    fit_var = fisher_inv @ score @ cov[np.ix_(idx, idx)] @ score.T @ fisher_inv
+    gls_var = np.linalg.inv(x.T @ np.linalg.solve(cov, x))
+    spreads = []
+    for var in (fit_var, gls_var):
+        spread = np.full(4, np.nan)
+        spread[present] = np.sqrt(np.diag(var)) / (2 * coef2[present])
+        spreads.append(spread)
+    return spreads[0], spreads[1]
+
+
+def precision(hours: float = 12.0) -> None:
+    """Spread (%) of N, B, K: the fit's (sandwich, linearised at the truth) against GLS and
+    the Cramér–Rao bound."""
     for truth in ((5e-4, 5e-5, 5e-7), (3e-4, 8e-5, 3e-7), (1e-3, 3e-5, 1e-6)):
-        coef2 = np.square(truth)
-        sums = np.empty((len(m), len(m)))
-        sums[i, j] = sums[j, i] = lag_sums(m[i], m[j], terms[i], terms[j], TAU0, (0, *coef2))
-        scale = 2 * m**2 * TAU0**2 * terms  # â(m) = Σ d² / scale
-        cov = 2 * sums / np.outer(scale, scale)
-        x = ieee952.design_columns(tau)[:, 1:4]
-        mu = x @ coef2
-        dense = tau[-1] / 4
-        idx = ieee952.fit_index(tau, 0, dense)
-        nu = 2 * mu[idx] ** 2 / np.diag(cov)[idx] * ieee952.evidence_weights(tau, idx, dense)
-        score = x[idx].T * (nu / (2 * mu[idx] ** 2))
-        fisher_inv = np.linalg.inv(score @ x[idx])
-        fit_var = fisher_inv @ score @ cov[np.ix_(idx, idx)] @ score.T @ fisher_inv
-        gls_var = np.linalg.inv(x.T @ np.linalg.solve(cov, x))
+        fit, gls = allan_spreads((0.0, *truth), hours * 3600, TAU0)
+        bound = whittle_crb(*truth, 0.0, hours * 3600, TAU0)
         for k, name in enumerate(("N", "B", "K")):
-            spread = [100 * np.sqrt(v[k, k]) / (2 * coef2[k]) for v in (fit_var, gls_var)]
-            print(f"N, B, K = {truth}: {name} spread {spread[0]:.2f} % (the fit) "
-                  f"{spread[1]:.2f} % (GLS, {len(m)} tau)")  # fmt: skip
+            print(f"N, B, K = {truth}: {name} spread {100 * fit[k + 1]:.2f} % (the fit) "
+                  f"{100 * gls[k + 1]:.2f} % (GLS, every tau) "
+                  f"{100 * bound[k]:.2f} % (Cramér-Rao)")  # fmt: skip
 
 
 def main() -> None:
@@ -101,9 +178,13 @@ def main() -> None:
     cov.add_argument("--n", type=float, default=PAPER_N, help="white rate N (rad/s/√Hz)")
     cov.add_argument("--b", type=float, default=PAPER_B, help="flicker B (rad/s); 0: none")
     sub.add_parser("precision")
+    pan = sub.add_parser("panel")
+    pan.add_argument("jsonl", type=Path, help="a loop_validation.py --jsonl file")
     args = ap.parse_args()
     if args.command == "coverage":
         coverage(args.records, args.samples, args.n, args.b)
+    elif args.command == "panel":
+        panel(args.jsonl)
     else:
         precision()
 
