@@ -336,6 +336,16 @@ def test_slow_correction_may_raise_the_deviance_by_up_to_the_tolerance():
     assert judge(old, _good(error=1.0), tolerance=2.4, fit_new=_fit(21.0))[1] is False  # 2.5
 
 
+def test_slow_correction_whose_curve_is_fitted_adequately_passes_whatever_the_rise():
+    """A baseline that soaked a strong slow effect fits snugly (D 5.4 on 10 dof); the corrected
+    curve's fit may then rise by more than the tolerance as long as D ≤ χ²₁₀(0.95) = 18.307."""
+    snug = _fit(5.4, dof=10)
+    assert judge(snug, _good(error=0.54), tolerance=CHI2_95, fit_new=_fit(18.3))[1] is True
+    assert judge(snug, _good(error=0.54), tolerance=CHI2_95, fit_new=_fit(18.31))[1] is False
+    # an AVAR term (tolerance 0) must still lower the error, adequate or not
+    assert judge(snug, _good(error=0.54), fit_new=_fit(18.3))[1] is False
+
+
 def test_max_abs_z_may_not_grow():
     z = {5: 3.5}
     assert judge(_fit(80.0), _good(max_abs_z=3.6, n_flags=1), z)[1] is True
