@@ -115,7 +115,7 @@ def panel(path: Path, within: float = 0.15) -> None:
             gls = allan_spreads((c["q"], c["n"], c["b"], c["k"]), seconds, tau0)[1][2]
             expected += 2 * stats.norm.cdf(within / np.array([bound, gls])) - 1
             error = rec["b_rel_error"].get(axis)
-            measured += error is not None and abs(error) < within
+            measured += error is not None and abs(error) <= within
             axes += 1
     print(f"B within {within:.0%} of the truth: measured {measured}/{axes} "
           f"({measured / axes:.0%}); expected at the Cramér-Rao bound (Whittle) "
