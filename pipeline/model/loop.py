@@ -51,7 +51,7 @@ from functools import partial
 from typing import Literal, NamedTuple
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
 
 from imupipe.model import effects, ieee952, spectral_line
 from imupipe.stats.allan import AllanCurve, SparseCorrection, allan_curves, oadev
@@ -864,7 +864,7 @@ def _judge(
     z = ieee952.deviance_residuals(avar, fit_new.avar(), edf)[_fitted(fit_new, tau)]
     rise = (fit_new.deviance - fit_old.deviance) / fit_old.dispersion
     error_ok = (
-        rise <= tolerance or fit_new.deviance <= stats.chi2.ppf(0.95, fit_new.dof)
+        rise <= tolerance or fit_new.deviance <= special.chdtri(fit_new.dof, 0.05)  # χ²(0.95)
         if tolerance > 0
         else fit_new.deviance / fit_new.dof < good_old.error
     )
