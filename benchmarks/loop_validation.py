@@ -231,6 +231,11 @@ def _median_half(rows: list[dict]) -> str:
     return f"{100 * np.median(halves):.0f} %" if halves else "-"
 
 
+def _right_where_powered(rows: list[dict]) -> list[bool]:
+    """Right kind on the right axis, per recording whose matched test has power ≥ 99 %."""
+    return [r["right"] for r in rows if (r.get("matched_power") or 0.0) >= 0.99]
+
+
 def table(rows: list[dict]) -> str:
     """The issue's table: one line per effect kind × size, and one for clean recordings."""
     head = (
@@ -249,7 +254,7 @@ def table(rows: list[dict]) -> str:
         n_errs = [e for r in rs for e in r["n_rel_error"].values()]
         b_errs = [e for r in rs for e in r["b_rel_error"].values()]
         false = [bool(r["false_axes"]) for r in rs]
-        powered = [r["right"] for r in rs if (r.get("matched_power") or 0.0) >= 0.99]
+        powered = _right_where_powered(rs)
         matched = _pct(powered) if powered else "-"
         if kind == "clean":
             det = right = err = matched = "-"
@@ -273,7 +278,7 @@ def table(rows: list[dict]) -> str:
             f"{_pct([e is None for e in b_errs])} | {_pct(_covered(rs, 'n_covered'))} | "
             f"{_pct(_covered(rs, 'b_covered'))} | {_median_half(rs)} | {found_as or '-'} |"
         )
-    powered = [r["right"] for r in rows if (r.get("matched_power") or 0.0) >= 0.99]
+    powered = _right_where_powered(rows)
     total = (
         f"\n\nRight kind on the right axis where the matched test has power ≥ 99 % (issue 13's "
         f"target ≥ 95 %): {_pct(powered)}"
