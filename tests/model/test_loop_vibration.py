@@ -130,3 +130,52 @@ def test_spread_line_is_a_narrowband_vibration_with_its_width(base, paper_gyro):
     assert line.evidence["band_excess"]["p_value"] < 1e-3
     (term,) = [e for e in res.terms_after.effects if e.kind == "narrowband"]
     assert term.as_model_term()["width_hz"] == line.params["width_hz"]
+
+
+def _periodic(rng, a1, a3, f1=0.05):
+    """A vibration that is not sinusoidal: a fundamental at ``f1`` Hz whose phase wanders a
+    little (a random walk) and a third harmonic of the same phase, amplitudes a1, a3."""
+    phase = 2 * np.pi * f1 * TAU0 * np.arange(N) + np.cumsum(rng.normal(0, 2e-3, N))
+    return a1 * np.sin(phase) + a3 * np.sin(3 * phase + 0.3)
+
+
+@pytest.mark.parametrize("a3", [0.0, 3.0])
+def test_third_harmonic_of_a_vibration_is_its_own_line(a3, base, paper_gyro):
+    """A 0.05 Hz vibration of 6 B with a third harmonic of 3 B: the sinusoid, then a line at
+    exactly 3 f1 labelled as its harmonic, one bin wide (the phase hardly wanders), its rms in
+    its interval; without the harmonic, the harmonic candidate is tried and refused."""
+    rng, y = base(27)
+    res = run(y + _periodic(rng, 6 * paper_gyro.b, a3 * paper_gyro.b))
+    kinds = [e.kind for e in res.accepted]
+    tried = [c for c in res.rejected if "harmonic_orders_tried" in c.evidence]
+    if a3 == 0:
+        assert kinds == ["sinusoid"]
+        (harmonic,) = tried
+        assert harmonic.reason.startswith("delta BIC")
+        assert harmonic.evidence["harmonic_orders_tried"] == 4  # 0.1, 0.15, 0.2, 0.25 Hz
+        return
+    assert kinds == ["sinusoid", "narrowband"]
+    f1 = res.accepted[0].params["frequency_hz"]
+    line = res.accepted[1]
+    assert line.evidence["harmonic"] == 3 and line.evidence["harmonic_of_hz"] == f1
+    assert line.params["frequency_hz"] == pytest.approx(3 * f1, rel=1e-12)
+    assert line.params["width_hz"] == pytest.approx(1 / (N * TAU0), rel=0.5)
+    lo, hi = line.intervals["rms"]
+    assert lo < 3 * paper_gyro.b / np.sqrt(2) < hi
+    assert line.evidence["band_excess"]["p_value"] < 1e-3
+    # the next round tries the orders left (2, 4, 5) and refuses the best of them
+    assert [c.evidence["harmonic"] for c in tried] == [5]
+
+
+def test_harmonic_orders_and_widths(base):
+    """Orders 2-5 of each fundamental in the fitted range, n times its width; none within 10 %
+    of a modelled line; a modelled harmonic is no fundamental of its own."""
+    _rng, y = base(28)
+    ax = loop._Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
+    state = loop._State(ax.avar, ax.y_d, None)
+    state.effect_parameters = {"narrowband": ("narrowband", (0.05, 0.002))}
+    specs = np.array(loop._harmonic_specs(ax, state))
+    np.testing.assert_allclose(specs, [(0.1, 0.004), (0.15, 0.006), (0.2, 0.008), (0.25, 0.01)])
+    state.effect_parameters["narrowband_2"] = ("narrowband", (0.148, 0.006))
+    specs = np.array(loop._harmonic_specs(ax, state))
+    np.testing.assert_allclose(specs, [(0.1, 0.004), (0.2, 0.008), (0.25, 0.01)])
