@@ -1084,6 +1084,13 @@ MAX_HARMONIC = 5
 """Harmonic orders searched for each modelled line (2 … this)."""
 
 
+def harmonic_order(f: float, f1: float) -> int | None:
+    """n when ``f`` (Hz) lies within 2 % of n·``f1``, n = 2 … :data:`MAX_HARMONIC`, else
+    ``None`` (a line at 17.7 × f1 is no harmonic: at that order any frequency is near one)."""
+    n = round(f / f1)
+    return n if 2 <= n <= MAX_HARMONIC and abs(f / (n * f1) - 1) < 0.02 else None
+
+
 def _harmonic_specs(ax: _Axis, state: _State) -> list[tuple[float, float]]:
     """(centre Hz, width Hz) of the harmonics n·f1 (n = 2 … :data:`MAX_HARMONIC`) of every
     modelled line (a sinusoid or a narrowband line that is no harmonic of another) whose AVAR
@@ -1100,15 +1107,10 @@ def _harmonic_specs(ax: _Axis, state: _State) -> list[tuple[float, float]]:
         if kind in LINE_KINDS
     }
 
-    def harmonic_of_another(f: float) -> bool:
-        return any(
-            round(f / g) >= 2 and abs(f / g - round(f / g)) < 0.02 * round(f / g) for g in lines
-        )
-
     bin_hz = 1.0 / (len(ax.sig.y) * ax.sig.tau0)
     specs: list[tuple[float, float]] = []
     for f1, w1 in lines.items():
-        if harmonic_of_another(f1):
+        if any(harmonic_order(f1, g) for g in lines):
             continue
         for n in range(2, MAX_HARMONIC + 1):
             f = n * f1
@@ -1443,9 +1445,8 @@ def _column_candidate(kind, spec, fit_new, state, ax) -> effects.Candidate:
         evidence = {"avar_peak_tau_s": 0.371 / spec[0], "shape": spec}
         lines = [s[0] for k, s in state.effect_parameters.values() if k in LINE_KINDS]
         for f1 in lines:
-            order = spec[0] / f1
-            if round(order) >= 2 and abs(order - round(order)) < 0.02 * round(order):
-                evidence["harmonic_of_hz"], evidence["harmonic"] = f1, round(order)
+            if order := harmonic_order(spec[0], f1):
+                evidence["harmonic_of_hz"], evidence["harmonic"] = f1, order
         return effects.Candidate(
             kind, params, {"rms": interval}, evidence, column=column, n_params=n_params
         )

@@ -179,3 +179,13 @@ def test_harmonic_orders_and_widths(base):
     state.effect_parameters["narrowband_2"] = ("narrowband", (0.148, 0.006))
     specs = np.array(loop._harmonic_specs(ax, state))
     np.testing.assert_allclose(specs, [(0.1, 0.004), (0.2, 0.008), (0.25, 0.01)])
+
+
+@pytest.mark.parametrize(
+    ("f", "order"), [(0.1, 2), (0.1019, 2), (0.1021, None), (0.25, 5), (0.3, None), (0.884, None)]
+)
+def test_harmonic_order_of_a_line(f, order):
+    """Orders 2-5 within 2 %: the real ADIS16405's 9.99 Hz line is no 18th harmonic of its
+    0.565 Hz disturbance (17.7 × f1; at that order every frequency is within 2 % of one)."""
+    assert loop.harmonic_order(f, 0.05) == order
+    assert loop.harmonic_order(9.992, 0.5653) is None
