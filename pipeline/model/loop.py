@@ -398,6 +398,7 @@ class _Axis:
         self.m_d = m_d[valid]
         self._spikes: effects.Candidate | None = None
         self._spikes_searched = sig.spike_free
+        self.line_widths: dict[tuple[float, bool], float] = {}  # :func:`_spectral_width`'s
         self._spike_avar: np.ndarray | None = None
         self._halves: dict[bool, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
 
@@ -1126,12 +1127,20 @@ def _harmonic_specs(ax: _Axis, state: _State) -> list[tuple[float, float]]:
 
 def _spectral_width(ax: _Axis, state: _State, f1: float) -> float:
     """Width (Hz) of the spectrum's line at ``f1``: the Whittle fit of
-    :func:`spectral_line.line_centre` in [f1/1.6, 1.6 f1] (0 with too few ordinates)."""
+    :func:`spectral_line.line_centre` in [f1/1.6, 1.6 f1] (0 with too few ordinates).  Read
+    once per axis from the full-rate series (every round asks again; the block means change
+    with each time-domain correction and are read anew)."""
     y, dt, fix = _spectrum_series(ax, state, f1 * 1.6)
+    key = (f1, state.spikes is None)
+    if y is ax.sig.y and key in ax.line_widths:
+        return ax.line_widths[key]
     freqs, power = effects.hann_periodogram(y, dt, f1 / 1.6, f1 * 1.6, fix)
     widths = np.geomspace(1.0 / (len(ax.sig.y) * ax.sig.tau0), 0.5 * f1, LINE_WIDTHS)
     centre = spectral_line.line_centre(freqs, power, f1, widths)
-    return 0.0 if centre is None else float(centre.width_hz)
+    width = 0.0 if centre is None else float(centre.width_hz)
+    if y is ax.sig.y:
+        ax.line_widths[key] = width
+    return width
 
 
 def _harmonic_trial(
