@@ -331,6 +331,14 @@ def _params(effect: dict) -> str:
     return ", ".join(parts)
 
 
+def _kind_text(record: dict) -> str:
+    """An effect's or candidate's kind, with the fundamental a harmonic line belongs to."""
+    evidence = record.get("evidence") or {}
+    order, f1 = evidence.get("harmonic"), evidence.get("harmonic_of_hz")
+    harmonic = "" if order is None else f" (harmonic {order} of {_fmt(f1)} Hz)"
+    return f"{record.get('kind')}{harmonic}"
+
+
 def _loop_details(result: AnalysisResult) -> list[str]:
     md = []
     for axis in result.axes.values():
@@ -339,11 +347,11 @@ def _loop_details(result: AnalysisResult) -> list[str]:
         md += [f"### {axis.name}", ""]
         for effect in jsonable(axis.loop.accepted):
             md.append(
-                f"- accepted **{effect['kind']}** ({_params(effect)}): error "
+                f"- accepted **{_kind_text(effect)}** ({_params(effect)}): error "
                 f"{_fmt(effect.get('error_before'))} → {_fmt(effect.get('error_after'))}"
             )
         for cand in jsonable(axis.loop.rejected):
-            md.append(f"- rejected candidate {cand.get('kind')}: {cand.get('reason', '')}".rstrip())
+            md.append(f"- rejected candidate {_kind_text(cand)}: {cand.get('reason', '')}".rstrip())
         before, after = axis.loop.terms_before, axis.loop.terms_after
         rows = []
         for name in TERM_NAMES:

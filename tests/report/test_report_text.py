@@ -17,6 +17,7 @@ from imupipe.analysis.results import AnalysisResult, AxisResult, InputSummary
 from imupipe.device.frame_schema import SCHEMA_NAME
 from imupipe.model import ieee952
 from imupipe.model.loop import AcceptedEffect, Goodness, LoopResult, RejectedCandidate
+from imupipe.report import report
 from imupipe.report.report import format_table, report_markdown
 from imupipe.stats.allan import AllanCurve
 
@@ -332,3 +333,9 @@ def test_duration_in_hours_and_one_sided_intervals() -> None:
     axis = r.axes["accel_y"]
     r.axes["accel_y"] = replace(axis, terms=replace(axis.terms, random_walk=n))
     assert _row(report_markdown(r, {}), "Random walk N", "accel_y", "mg/√s")[2] == fmt(2e-3 * MG)
+
+
+def test_a_harmonic_line_names_its_fundamental() -> None:
+    harmonic = {"kind": "narrowband", "evidence": {"harmonic": 3, "harmonic_of_hz": 0.5652609}}
+    assert report._kind_text(harmonic) == "narrowband (harmonic 3 of 0.5653 Hz)"
+    assert report._kind_text({"kind": "narrowband", "evidence": {}}) == "narrowband"
