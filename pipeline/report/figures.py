@@ -8,7 +8,8 @@
   figures 4 (accelerometers) and 5 (gyroscopes) of the ADIS16364 paper.
 - ``loop_<sensor>.png``: the closed loop of issue 4 — measured deviation (and, when an effect was
   regressed out in the time domain, the deviation after that correction), model before and after,
-  and the normalised residual z before and after.
+  and the normalised residual z before and after, each over its fit's τ range (symmetric-log
+  beyond |z| = 5, so a rejected baseline's large z leaves the final model's readable).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axis import Axis
-from matplotlib.ticker import LogLocator
+from matplotlib.ticker import FormatStrFormatter, LogLocator, NullLocator
 
 from imupipe.analysis.results import AnalysisResult, AxisResult
 from imupipe.model.ieee952 import design_columns
@@ -109,6 +110,19 @@ def allan_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None
     return path
 
 
+Z_LINEAR = 5.0
+"""|z| up to which the residual panel is linear (logarithmic beyond, when a z exceeds it)."""
+
+
+def within_fit(tau: np.ndarray, values: np.ndarray, tau_range: tuple[float, float]) -> np.ndarray:
+    """``values`` (a model's deviation or its residual z) where τ (s) lies in the fitted
+    ``tau_range`` (s), NaN elsewhere: outside it the model was not fitted (below the fit start
+    it may not even apply), so neither its curve nor its residual says anything there."""
+    lo, hi = tau_range
+    inside = (tau >= lo * (1 - 1e-9)) & (tau <= hi * (1 + 1e-9))
+    return np.where(inside, np.asarray(values, dtype=float), np.nan)
+
+
 def loop_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None:
     """Measured deviation with model before/after (top) and normalised residuals z (bottom)."""
     axes = [a for a in result.by_sensor(sensor) if a.loop is not None]
@@ -117,6 +131,7 @@ def loop_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None:
     fig, (top, bottom) = plt.subplots(
         2, 1, figsize=(8, 7.5), sharex=True, gridspec_kw={**_MARGINS, "height_ratios": (2, 1)}
     )
+    z_max = 0.0
     for axis in axes:
         color, loop = _color(axis), axis.loop
         tau = np.asarray(axis.curve.tau_s, dtype=float)
@@ -124,10 +139,14 @@ def loop_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None:
         after = np.asarray(loop.adev_after, dtype=float)
         if not np.allclose(after, axis.curve.adev, rtol=1e-9, equal_nan=True):
             top.plot(tau, after, "s", mfc="none", color=color, ms=3.5, label="after corrections")
-        top.plot(tau, loop.model_adev_before, "--", color=color, lw=1.0)
-        top.plot(tau, loop.model_adev_after, "-", color=color, lw=1.4)
-        bottom.plot(tau, loop.z_before, "o--", color=color, ms=2.5, lw=0.6, alpha=0.5)
-        bottom.plot(tau, loop.z_after, "o-", color=color, ms=2.5, lw=1.0, label=axis.name)
+        before, after = loop.before.tau_range, loop.after.tau_range
+        top.plot(tau, within_fit(tau, loop.model_adev_before, before), "--", color=color, lw=1.0)
+        top.plot(tau, within_fit(tau, loop.model_adev_after, after), "-", color=color, lw=1.4)
+        z_before = within_fit(tau, loop.z_before, before)
+        z_after = within_fit(tau, loop.z_after, after)
+        bottom.plot(tau, z_before, "o--", color=color, ms=2.5, lw=0.6, alpha=0.5)
+        bottom.plot(tau, z_after, "o-", color=color, ms=2.5, lw=1.0, label=axis.name)
+        z_max = max(z_max, float(np.nanmax(np.abs(np.r_[z_before, z_after, 0.0]))))
     top.plot([], [], "--", color="0.3", label="model before")
     top.plot([], [], "-", color="0.3", label="model after")
     _finish_loglog(top, axes)
@@ -137,6 +156,12 @@ def loop_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None:
     for level in (-3.0, 3.0):
         bottom.axhline(level, color="0.5", lw=0.6, ls=":")
     bottom.axhline(0.0, color="0.3", lw=0.6)
+    if z_max > Z_LINEAR:  # a rejected baseline's z in the hundreds would flatten the rest
+        bottom.set_yscale("symlog", linthresh=Z_LINEAR)
+        ticks = [t for t in (3, 10, 30, 100, 300, 1000, 3000) if t <= 1.5 * z_max]
+        bottom.set_yticks([-t for t in ticks[::-1]] + [0] + ticks)
+        bottom.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        bottom.yaxis.set_minor_locator(NullLocator())
     bottom.set_ylabel("normalised residual z")
     bottom.set_xlabel("averaging time τ [s]")
     bottom.grid(True, which="major", lw=0.4, alpha=0.6)
