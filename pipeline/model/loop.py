@@ -131,6 +131,15 @@ class Goodness:
     n_flags: int  # points with |z| > 3
     tau_range: tuple[float, float]  # s: the fitted τ (error, max |z|, rms z and flags read these)
 
+    def fitted(self, tau: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """``values`` at ``tau`` (s) — the model's deviation or its residual z — where τ lies in
+        the fitted range, NaN elsewhere: outside it the model was not fitted (below the fit
+        start it may not even apply), so neither its curve nor its residual says anything."""
+        lo, hi = self.tau_range
+        tau = np.asarray(tau, dtype=float)
+        inside = (tau >= lo * (1 - 1e-9)) & (tau <= hi * (1 + 1e-9))
+        return np.where(inside, np.asarray(values, dtype=float), np.nan)
+
 
 @dataclass(frozen=True)
 class AcceptedEffect:

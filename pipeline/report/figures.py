@@ -114,15 +114,6 @@ Z_LINEAR = 5.0
 """|z| up to which the residual panel is linear (logarithmic beyond, when a z exceeds it)."""
 
 
-def within_fit(tau: np.ndarray, values: np.ndarray, tau_range: tuple[float, float]) -> np.ndarray:
-    """``values`` (a model's deviation or its residual z) where τ (s) lies in the fitted
-    ``tau_range`` (s), NaN elsewhere: outside it the model was not fitted (below the fit start
-    it may not even apply), so neither its curve nor its residual says anything there."""
-    lo, hi = tau_range
-    inside = (tau >= lo * (1 - 1e-9)) & (tau <= hi * (1 + 1e-9))
-    return np.where(inside, np.asarray(values, dtype=float), np.nan)
-
-
 def loop_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None:
     """Measured deviation with model before/after (top) and normalised residuals z (bottom)."""
     axes = [a for a in result.by_sensor(sensor) if a.loop is not None]
@@ -139,11 +130,10 @@ def loop_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None:
         after = np.asarray(loop.adev_after, dtype=float)
         if not np.allclose(after, axis.curve.adev, rtol=1e-9, equal_nan=True):
             top.plot(tau, after, "s", mfc="none", color=color, ms=3.5, label="after corrections")
-        before, after = loop.before.tau_range, loop.after.tau_range
-        top.plot(tau, within_fit(tau, loop.model_adev_before, before), "--", color=color, lw=1.0)
-        top.plot(tau, within_fit(tau, loop.model_adev_after, after), "-", color=color, lw=1.4)
-        z_before = within_fit(tau, loop.z_before, before)
-        z_after = within_fit(tau, loop.z_after, after)
+        before, after = loop.before.fitted, loop.after.fitted
+        top.plot(tau, before(tau, loop.model_adev_before), "--", color=color, lw=1.0)
+        top.plot(tau, after(tau, loop.model_adev_after), "-", color=color, lw=1.4)
+        z_before, z_after = before(tau, loop.z_before), after(tau, loop.z_after)
         bottom.plot(tau, z_before, "o--", color=color, ms=2.5, lw=0.6, alpha=0.5)
         bottom.plot(tau, z_after, "o-", color=color, ms=2.5, lw=1.0, label=axis.name)
         z_max = max(z_max, float(np.nanmax(np.abs(np.r_[z_before, z_after, 0.0]))))

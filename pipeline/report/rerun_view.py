@@ -239,9 +239,15 @@ def allan_extent(axes: list[AxisResult]) -> Extent:
     return Extent(x0, x1, -float(np.ceil(y.max())), -float(np.floor(y.min())))
 
 
+def _z(axis: AxisResult, which: str) -> np.ndarray:
+    """The loop's residual z ``before`` or ``after`` over that fit's τ range (NaN elsewhere)."""
+    good = getattr(axis.loop, which)
+    return good.fitted(axis.curve.tau_s, good.z)
+
+
 def residual_extent(axes: list[AxisResult]) -> Extent:
     """Whole decades of τ; z from −zmax to +zmax (at least ±4, at most ±:data:`Z_LIMIT`)."""
-    z = np.abs(np.concatenate([np.r_[a.loop.z_before, a.loop.z_after] for a in axes]))
+    z = np.abs(np.concatenate([np.r_[_z(a, "before"), _z(a, "after")] for a in axes]))
     z = z[np.isfinite(z)]
     zmax = float(np.clip(np.ceil(z.max()) if z.size else 4.0, 4.0, Z_LIMIT))
     x0, x1 = _tau_range(axes)
@@ -402,8 +408,8 @@ def _log_residuals(rec: rr.RecordingStream, sensor: str, axes: list[AxisResult])
         x = _log10(axis.curve.tau_s)
         color = _color(axis.name)
         for name, z, shade, width in (
-            ("z_before", axis.loop.z_before, _light(color), MODEL_BEFORE_WIDTH),
-            ("z_after", axis.loop.z_after, color, ADEV_WIDTH),
+            ("z_before", _z(axis, "before"), _light(color), MODEL_BEFORE_WIDTH),
+            ("z_after", _z(axis, "after"), color, ADEV_WIDTH),
         ):
             z = np.clip(np.asarray(z, float), -zmax, zmax)
             rec.log(
