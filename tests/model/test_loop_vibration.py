@@ -189,3 +189,33 @@ def test_harmonic_order_of_a_line(f, order):
     0.565 Hz disturbance (17.7 × f1; at that order every frequency is within 2 % of one)."""
     assert loop.harmonic_order(f, 0.05) == order
     assert loop.harmonic_order(9.992, 0.5653) is None
+
+
+def test_harmonic_trial_counts_one_parameter_and_holds_out_beside_its_fundamental(base, paper_gyro):
+    """With the sinusoid of a 6 B vibration modelled, its 2 B third harmonic: ΔBIC counts one
+    parameter (dof falls by one) less 2 ln 4 for the orders tried, and the hold-out fits each
+    half with the fundamental in the model (without it, the harmonic does not hold out: the
+    halves' models lack the line that dominates their curves)."""
+    rng, y = base(29)
+    y = y + _periodic(rng, 6 * paper_gyro.b, 2 * paper_gyro.b)
+    ax = loop._Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
+    bare = loop._State(ax.avar, ax.y_d.copy(), None)
+    ((_, with_line),) = loop._column_fits(
+        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(0.05,)], 0, None, ax.dense_from
+    )
+    state = bare.with_column(
+        "sinusoid", loop._column_candidate("sinusoid", (0.05,), with_line, bare, ax)
+    )
+    fit = state.fit(ax)
+    good = loop.goodness(fit, ax.tau, state.avar, ax.edf)
+    (d,) = [d for d in loop._evaluate(ax, state, fit, good) if d.trial.kind.endswith("harmonic")]
+    assert d.accept and d.trial.cand.evidence["harmonic"] == 3
+    new = d.trial.state.fit(ax)
+    assert new.dof == fit.dof - 1
+    expected = (
+        (fit.deviance - new.deviance) / new.dispersion - np.log(len(new.fit_index)) - 2 * np.log(4)
+    )
+    assert d.trial.cand.evidence["avar_delta_bic"] == pytest.approx(expected, rel=1e-12)
+    assert d.holdout["holds"] and min(d.holdout["deviance_gain_heldout"]) > 5
+    without_fundamental = loop._holdout_column(ax, bare, d.trial.cand)
+    assert not without_fundamental["holds"]
