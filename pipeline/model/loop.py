@@ -30,6 +30,9 @@ deviance over the same τ points, and the loop's terms before equal the reported
 One exception: a narrowband line whose AVAR hump lies among the short τ the fit start left out
 (:func:`_short_line_trial`) is judged on the wider range the fit start chooses with it, against
 the current model on that range; once accepted, that range holds for the rest of the loop.
+Once a line is modelled, its harmonics are candidates too (:func:`_harmonic_trial`: centre and
+width from the fundamental, only the rms fitted, so ΔBIC counts one parameter and 2 ln M for
+the M orders tried).
 
 The loop's records are frozen dataclasses (:class:`Trial`, :class:`Decision`,
 :class:`AcceptedEffect`, :class:`RejectedCandidate`), serialised for report.json by
