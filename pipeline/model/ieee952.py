@@ -561,15 +561,30 @@ class CompositeFit:
             return dev - self.deviance - limit
 
         best = float(self.coef[j])
+
         # Each end is bracketed by walking away from the fit in steps, so that every fit has
         # a near neighbour to continue from, up to the first c past the limit; brentq then
         # solves inside that step.
+        def crossing(a: float, b: float, xtol: float) -> float | None:
+            """The limit's crossing between the walk's last c within it and its first past
+            it (``a``, ``b`` in either order); ``None`` when the one past it, fitted again
+            from its own solution (brentq evaluates the ends anew), lies within the limit
+            after all: the walk goes on.  Measured on a 2 h recording of the independent
+            generator with a strong sinusoid and its third harmonic, where brentq raised
+            "f(a) and f(b) must have different signs" (an internal error, exit 1)."""
+            try:
+                return optimize.brentq(excess, a, b, xtol=xtol, rtol=1e-6)
+            except ValueError:
+                return None
+
         lo = 0.0
         inner = best
         for c in best * np.linspace(0.9, 0.0, 10) if best > 0 else ():
             if excess(c) > 0:  # a coefficient at its bound 0 has lo = 0
-                lo = optimize.brentq(excess, c, inner, xtol=1e-6 * best, rtol=1e-6)
-                break
+                root = crossing(c, inner, 1e-6 * best)
+                if root is not None:
+                    lo = root
+                    break
             inner = c
         # upper end: 10 % steps up to 4x the fit (or from a tiny fraction of the data's
         # level), doubling beyond, until the deviance rises past the limit
@@ -577,7 +592,9 @@ class CompositeFit:
         inner, c = best, max(1.1 * best, tiny)
         for _ in range(400):
             if excess(c) > 0:
-                return lo, optimize.brentq(excess, inner, c, xtol=1e-6 * c, rtol=1e-6)
+                root = crossing(inner, c, 1e-6 * c)
+                if root is not None:
+                    return lo, root
             if not np.isfinite(2.0 * c):  # the data do not bound it (e.g. a null column)
                 break
             inner, c = c, c * (1.1 if c < 4.0 * best else 2.0)

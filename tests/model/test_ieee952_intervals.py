@@ -391,3 +391,28 @@ def test_sandwich_factor_of_a_singular_fit_is_one() -> None:
     twin = dataclasses.replace(fit, design=design, coef=fit.coef + np.array([0, 0, 0, 0, 1e-7]))
     rho = np.full((10, 10), 0.5) + 0.5 * np.eye(10)
     assert twin.sandwich_factor(edf, rho, 1) == 1.0
+
+
+def test_profile_end_refitted_from_its_own_solution_lies_within_the_limit() -> None:
+    """A loop candidate column's profile (independent generator, seed 8100: a size-3
+    sinusoid on gyro_y with a third harmonic of size 10 added, 2 h at 100 Hz; an early round,
+    D/dof 3345; tests/data/profile_refit_flip.npz): the walk found a c past the limit, but
+    brentq, fitting that end again from its own solution, found it within — "f(a) and f(b)
+    must have different signs", an internal error of the whole analysis (also before session
+    16's harmonics).  The walk now goes on past such a c."""
+    case = np.load(Path(__file__).parents[1] / "data" / "profile_refit_flip.npz")
+    fit = ieee952.CompositeFit(
+        tuple(case["names"]),
+        case["coef"],
+        case["design"],
+        case["fit_index"],
+        float(case["deviance"]),
+        int(case["dof"]),
+        float(case["cutoff_hz"]),
+        int(case["short_sign"]),
+        case["weight"],
+    )
+    j = int(case["j"])
+    lo, hi = fit.profile_interval(case["avar"], case["edf"], j, float(case["level"]))
+    assert lo / fit.coef[j] == pytest.approx(0.36328, rel=1e-3)
+    assert hi / fit.coef[j] == pytest.approx(2.14359, rel=1e-3)
