@@ -562,9 +562,6 @@ class CompositeFit:
 
         best = float(self.coef[j])
 
-        # Each end is bracketed by walking away from the fit in steps, so that every fit has
-        # a near neighbour to continue from, up to the first c past the limit; brentq then
-        # solves inside that step.
         def crossing(a: float, b: float, xtol: float) -> float | None:
             """The limit's crossing between the walk's last c within it and its first past
             it (``a``, ``b`` in either order); ``None`` when the one past it, fitted again
@@ -577,6 +574,9 @@ class CompositeFit:
             except ValueError:
                 return None
 
+        # Each end is bracketed by walking away from the fit in steps, so that every fit has
+        # a near neighbour to continue from, up to the first c past the limit; brentq then
+        # solves inside that step.
         lo = 0.0
         inner = best
         for c in best * np.linspace(0.9, 0.0, 10) if best > 0 else ():

@@ -130,10 +130,10 @@ def loop_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None:
         after = np.asarray(loop.adev_after, dtype=float)
         if not np.allclose(after, axis.curve.adev, rtol=1e-9, equal_nan=True):
             top.plot(tau, after, "s", mfc="none", color=color, ms=3.5, label="after corrections")
-        before, after = loop.before.fitted, loop.after.fitted
-        top.plot(tau, before(tau, loop.model_adev_before), "--", color=color, lw=1.0)
-        top.plot(tau, after(tau, loop.model_adev_after), "-", color=color, lw=1.4)
-        z_before, z_after = before(tau, loop.z_before), after(tau, loop.z_after)
+        fitted_before, fitted_after = loop.before.fitted, loop.after.fitted
+        top.plot(tau, fitted_before(tau, loop.model_adev_before), "--", color=color, lw=1.0)
+        top.plot(tau, fitted_after(tau, loop.model_adev_after), "-", color=color, lw=1.4)
+        z_before, z_after = fitted_before(tau, loop.z_before), fitted_after(tau, loop.z_after)
         bottom.plot(tau, z_before, "o--", color=color, ms=2.5, lw=0.6, alpha=0.5)
         bottom.plot(tau, z_after, "o-", color=color, ms=2.5, lw=1.0, label=axis.name)
         z_max = max(z_max, float(np.nanmax(np.abs(np.r_[z_before, z_after, 0.0]))))
