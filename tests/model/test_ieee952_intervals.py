@@ -280,17 +280,9 @@ def test_profile_interval_of_a_column_the_data_do_not_bound_is_open_above() -> N
     assert lo < 1e-6 < hi  # the true N² (data: N = 1e-3 with gamma scatter)
 
 
-def test_profile_of_a_sinusoid_column_follows_its_lowest_branch() -> None:
-    """A loop candidate's profile (independent generator, a size-10 sinusoid on accel_z, 2 h at
-    100 Hz, panel seed 700005; tests/data/profile_sinusoid_null.npz): refitting the other
-    terms from zero under the sinusoid's column, whose AVAR vanishes at τ = k/f, stuck the
-    iteration at the model's floor (deviance 7e12 against the fit's 5837) and brentq raised —
-    the analysis crashed. Each profile fit now starts from the fit's own optimum.  Session 12:
-    from the optimum alone, fits at c above ~1.4x the estimate land on one of two branches
-    (deviance +1336 or +3605 at 2x) or stall at the floor, so the upper end came out at 1.714x,
-    where the lower branch stays under the limit up to 2.43x.  The ends are now bracketed by
-    walking in steps, each fit also continuing from its neighbour's solution."""
-    case = np.load(Path(__file__).parents[1] / "data" / "profile_sinusoid_null.npz")
+def _stored_profile_case(name: str) -> tuple[ieee952.CompositeFit, np.lib.npyio.NpzFile]:
+    """(the fit, the stored arrays) of a loop candidate's profile captured in tests/data."""
+    case = np.load(Path(__file__).parents[1] / "data" / name)
     fit = ieee952.CompositeFit(
         tuple(case["names"]),
         case["coef"],
@@ -302,6 +294,20 @@ def test_profile_of_a_sinusoid_column_follows_its_lowest_branch() -> None:
         int(case["short_sign"]),
         case["weight"],
     )
+    return fit, case
+
+
+def test_profile_of_a_sinusoid_column_follows_its_lowest_branch() -> None:
+    """A loop candidate's profile (independent generator, a size-10 sinusoid on accel_z, 2 h at
+    100 Hz, panel seed 700005; tests/data/profile_sinusoid_null.npz): refitting the other
+    terms from zero under the sinusoid's column, whose AVAR vanishes at τ = k/f, stuck the
+    iteration at the model's floor (deviance 7e12 against the fit's 5837) and brentq raised —
+    the analysis crashed. Each profile fit now starts from the fit's own optimum.  Session 12:
+    from the optimum alone, fits at c above ~1.4x the estimate land on one of two branches
+    (deviance +1336 or +3605 at 2x) or stall at the floor, so the upper end came out at 1.714x,
+    where the lower branch stays under the limit up to 2.43x.  The ends are now bracketed by
+    walking in steps, each fit also continuing from its neighbour's solution."""
+    fit, case = _stored_profile_case("profile_sinusoid_null.npz")
     j = int(case["j"])
     lo, hi = fit.profile_interval(case["avar"], case["edf"], j, float(case["level"]))
     assert lo == 0.0  # the baseline's dispersion (D/dof 730) does not bound it from below
@@ -400,18 +406,7 @@ def test_profile_end_refitted_from_its_own_solution_lies_within_the_limit() -> N
     brentq, fitting that end again from its own solution, found it within — "f(a) and f(b)
     must have different signs", an internal error of the whole analysis (also before session
     16's harmonics).  The walk now goes on past such a c."""
-    case = np.load(Path(__file__).parents[1] / "data" / "profile_refit_flip.npz")
-    fit = ieee952.CompositeFit(
-        tuple(case["names"]),
-        case["coef"],
-        case["design"],
-        case["fit_index"],
-        float(case["deviance"]),
-        int(case["dof"]),
-        float(case["cutoff_hz"]),
-        int(case["short_sign"]),
-        case["weight"],
-    )
+    fit, case = _stored_profile_case("profile_refit_flip.npz")
     j = int(case["j"])
     lo, hi = fit.profile_interval(case["avar"], case["edf"], j, float(case["level"]))
     assert lo / fit.coef[j] == pytest.approx(0.36328, rel=1e-3)
