@@ -138,10 +138,7 @@ class Goodness:
         """``values`` at ``tau`` (s) — the model's deviation or its residual z — where τ lies in
         the fitted range, NaN elsewhere: outside it the model was not fitted (below the fit
         start it may not even apply), so neither its curve nor its residual says anything."""
-        lo, hi = self.tau_range
-        tau = np.asarray(tau, dtype=float)
-        inside = (tau >= lo * (1 - 1e-9)) & (tau <= hi * (1 + 1e-9))
-        return np.where(inside, np.asarray(values, dtype=float), np.nan)
+        return np.where(_inside(tau, self.tau_range), np.asarray(values, dtype=float), np.nan)
 
 
 @dataclass(frozen=True)
@@ -333,10 +330,16 @@ def _fit(
     )
 
 
+def _inside(tau: np.ndarray, tau_range: tuple[float, float]) -> np.ndarray:
+    """Mask of the τ (s) inside ``tau_range`` (s), its ends included up to rounding."""
+    lo, hi = tau_range
+    tau = np.asarray(tau, dtype=float)
+    return (tau >= lo * (1 - 1e-9)) & (tau <= hi * (1 + 1e-9))
+
+
 def _fitted(fit: ieee952.CompositeFit, tau: np.ndarray) -> np.ndarray:
     """Mask of the τ inside the fitted range (flags are counted there only)."""
-    lo, hi = fit.tau_range
-    return (tau >= lo * (1 - 1e-9)) & (tau <= hi * (1 + 1e-9))
+    return _inside(tau, fit.tau_range)
 
 
 def goodness(
@@ -627,6 +630,22 @@ def _grids(ax: _Axis, state: _State) -> dict[str, list[tuple]]:
     }
 
 
+def _line_widths(ax: _Axis, f: float) -> np.ndarray:
+    """The :data:`LINE_WIDTHS` widths (Hz) searched for a line at ``f`` Hz: from one frequency
+    bin of the record, 1/T, to half its frequency."""
+    return np.geomspace(1.0 / (len(ax.sig.y) * ax.sig.tau0), 0.5 * f, LINE_WIDTHS)
+
+
+def _spectrum_line(
+    ax: _Axis, state: _State, f: float, widths: np.ndarray
+) -> spectral_line.LineCentre | None:
+    """The Whittle fit of the spread line near ``f`` Hz (:func:`spectral_line.line_centre`,
+    over ``widths``) to the periodogram of :func:`_spectrum_series` in [f/1.6, 1.6 f]."""
+    y, dt, fix = _spectrum_series(ax, state, f * 1.6)
+    freqs, power = effects.hann_periodogram(y, dt, f / 1.6, f * 1.6, fix)
+    return spectral_line.line_centre(freqs, power, f, widths)
+
+
 def _narrowband_refine(
     ax: _Axis, state: _State, spec: tuple, cutoff_hz: float
 ) -> tuple[tuple, list[tuple[tuple, ieee952.CompositeFit]], ieee952.CompositeFit, dict]:
@@ -649,11 +668,8 @@ def _narrowband_refine(
     band = (f / 1.6, f * 1.6)
     line = _line(ax, state, *band)
     peak = line.get("frequency_hz", f)
-    duration = len(ax.sig.y) * ax.sig.tau0
-    widths = np.geomspace(1.0 / duration, 0.5 * peak, LINE_WIDTHS)
-    y, dt, fix = _spectrum_series(ax, state, peak * 1.6)
-    freqs, power = effects.hann_periodogram(y, dt, peak / 1.6, peak * 1.6, fix)
-    centre = spectral_line.line_centre(freqs, power, peak, widths)
+    widths = _line_widths(ax, peak)
+    centre = _spectrum_line(ax, state, peak, widths)
     if centre is None:
         evidence = {"frequency_hz": peak, "frequency_lo": band[0], "frequency_hi": band[1]}
     else:  # the hull of the spread line's and the tone's interval
@@ -1142,15 +1158,13 @@ def _spectral_width(ax: _Axis, state: _State, f1: float) -> float:
     :func:`spectral_line.line_centre` in [f1/1.6, 1.6 f1] (0 with too few ordinates).  Read
     once per axis from the full-rate series (every round asks again; the block means change
     with each time-domain correction and are read anew)."""
-    y, dt, fix = _spectrum_series(ax, state, f1 * 1.6)
+    full_rate = _spectrum_series(ax, state, f1 * 1.6)[0] is ax.sig.y
     key = (f1, state.spikes is None)
-    if y is ax.sig.y and key in ax.line_widths:
+    if full_rate and key in ax.line_widths:
         return ax.line_widths[key]
-    freqs, power = effects.hann_periodogram(y, dt, f1 / 1.6, f1 * 1.6, fix)
-    widths = np.geomspace(1.0 / (len(ax.sig.y) * ax.sig.tau0), 0.5 * f1, LINE_WIDTHS)
-    centre = spectral_line.line_centre(freqs, power, f1, widths)
+    centre = _spectrum_line(ax, state, f1, _line_widths(ax, f1))
     width = 0.0 if centre is None else float(centre.width_hz)
-    if y is ax.sig.y:
+    if full_rate:
         ax.line_widths[key] = width
     return width
 
