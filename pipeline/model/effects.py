@@ -572,6 +572,31 @@ def step_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
     return cand
 
 
+def tone_candidate(
+    y_d: np.ndarray, dt: float, f0: float, whiten: Whitener, n_frequencies: int
+) -> Candidate:
+    """GLS test of a tone at ``f0`` Hz in the block means ``y_d`` (rate units, blocks of ``dt``
+    s): sin and cos of the blocks' mid-times as regressors, the drift a nuisance, Wald χ² on 2
+    dof — the matched test of a sinusoid of known frequency under the (fitted) noise PSD —
+    Bonferroni-adjusted for the ``n_frequencies`` the tone's frequency was chosen among.
+    ``params``: the sin and cos amplitudes of the tone (the mean of A sin(2πf0t + φ) over a
+    block is sinc(f0 dt) A sin at its mid-time); ``amplitude`` in the evidence."""
+    t = (np.arange(len(y_d)) + 0.5) * dt
+    phase = 2 * np.pi * f0 * t
+    cand = Candidate(
+        "sinusoid",
+        {},
+        {},
+        regressors=np.sinc(f0 * dt) * np.column_stack([np.sin(phase), np.cos(phase)]),
+        names=("sin", "cos"),
+        n_options=n_frequencies,
+        n_params=2,
+    )
+    cand.refit(whiten, y_d)
+    cand.evidence["amplitude"] = float(np.hypot(cand.params["sin"], cand.params["cos"]))
+    return cand
+
+
 def warmup_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
     """Warm-up drift a·e^{−t/τw}, τw over :data:`N_WARMUP_TAU` log-spaced values (30 dt … T/3).
 
