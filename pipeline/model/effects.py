@@ -282,18 +282,24 @@ def observed_blocks(masked: np.ndarray | None, n_coarse: int, factor: int) -> np
 
 def _summed_covariance(gamma: np.ndarray, blocks: np.ndarray) -> np.ndarray:
     """Covariance of the differences between consecutive ``blocks`` (coarse indices): entry
-    (i, j) is the sum of Γ over differences [bᵢ, bᵢ₊₁) × [bⱼ, bⱼ₊₁), Γ = Toeplitz(``gamma``),
-    read from Γ's two-dimensional cumulative sums."""
+    (i, j) is the sum of Γ over differences [bᵢ, bᵢ₊₁) × [bⱼ, bⱼ₊₁), Γ = Toeplitz(``gamma``).
+
+    With Sₖ the sum of the first k coarse differences, Cov(Sₚ, S_q) = ½[C(p) + C(q) − C(|p − q|)]
+    (stationarity: Var(Sₚ − S_q) = C(|p − q|)), C(k) = Var Sₖ = Σ_{|l|<k} (k − |l|) γ(|l|); the
+    four corners of each rectangle leave ½[C(|hᵢ − lⱼ|) + C(|lᵢ − hⱼ|) − C(|hᵢ − hⱼ|) −
+    C(|lᵢ − lⱼ|)] (l, h: the blocks' starts and ends) — O(m) to tabulate C instead of the
+    O(m²) two-dimensional cumulative sum of Γ."""
     m = len(gamma)
-    total = np.zeros((m + 1, m + 1))
-    total[1:, 1:] = linalg.toeplitz(gamma).cumsum(axis=0).cumsum(axis=1)
+    increments = np.empty(m + 1)  # C(k) − C(k − 1) = γ(0) + 2 Σ_{0<l<k} γ(l)
+    increments[0] = 0.0
+    increments[1:] = 2 * np.cumsum(gamma) - gamma[0]
+    var_sum = np.cumsum(increments)
     lo, hi = blocks[:-1], blocks[1:]
-    return (
-        total[np.ix_(hi, hi)]
-        - total[np.ix_(lo, hi)]
-        - total[np.ix_(hi, lo)]
-        + total[np.ix_(lo, lo)]
-    )
+
+    def c(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return var_sum[np.abs(a[:, None] - b[None, :])]
+
+    return 0.5 * (c(hi, lo) + c(lo, hi) - c(hi, hi) - c(lo, lo))
 
 
 @numba.njit(cache=True, nogil=True)

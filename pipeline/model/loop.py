@@ -252,14 +252,17 @@ class _State:
     avar_d: np.ndarray | None = None  # AVAR of y_d at the decimated factors (cache)
     # (kind, shape parameters of ieee952.effect_shape) of each column
     effect_parameters: dict[str, tuple[str, tuple]] = field(default_factory=dict)
+    # 95 % interval (Hz) of each modelled line's frequency (sinusoid, narrowband), by column
+    frequency_intervals: dict[str, list[float]] = field(default_factory=dict)
 
     def with_column(self, name: str, cand: effects.Candidate) -> _State:
         """This state with the AVAR-column candidate ``cand`` added as column ``name``: its
         non-linear parameters counted, its shape (``cand.evidence["shape"]``) recorded (the
         time-domain model reads it: :func:`noise_psd`, :func:`time_domain_fit`).  Its value is
         linear; its other ``n_params`` − 1 parameters are not (a harmonic's: none, its shape is
-        its fundamental's)."""
+        its fundamental's).  A line's frequency interval is kept for its harmonics'."""
         kind = cand.kind
+        interval = cand.intervals.get("frequency_hz")
         return _State(
             self.avar,
             self.y_d,
@@ -267,6 +270,7 @@ class _State:
             self.columns | {name: cand.column},
             self.n_nonlinear + cand.n_params - 1,
             effect_parameters=self.effect_parameters | {name: (kind, cand.evidence["shape"])},
+            frequency_intervals=self.frequency_intervals | ({name: interval} if interval else {}),
         )
 
     def fit(self, ax: _Axis, possible_b: bool = False) -> ieee952.CompositeFit:
@@ -1239,6 +1243,13 @@ def _harmonic_trial(
     cand = _column_candidate("narrowband", spec, fit_new, state, ax)
     cand.n_params = 1
     cand.evidence["harmonic_orders_tried"] = len(specs)
+    fundamental = [
+        state.frequency_intervals.get(n)
+        for n, (_, s) in state.effect_parameters.items()
+        if s[0] == cand.evidence["harmonic_of_hz"]
+    ]
+    if fundamental and fundamental[0]:  # the centre is n·f1 exactly: its interval n times f1's
+        cand.intervals["frequency_hz"] = [cand.evidence["harmonic"] * f for f in fundamental[0]]
     penalty = 2.0 * np.log(len(specs))
     trial = _column_trial(ax, state, current, name, cand, [(spec, fit_new)], errors, penalty)
     return replace(trial, kind=f"{name} harmonic")  # its own record next to the searched line's
@@ -1317,6 +1328,7 @@ def _corrected_state(ax: _Axis, state: _State, cand: effects.Candidate) -> _Stat
         state.columns,
         state.n_nonlinear,
         effect_parameters=state.effect_parameters,
+        frequency_intervals=state.frequency_intervals,
     )
 
 

@@ -159,6 +159,10 @@ def test_third_harmonic_of_a_vibration_is_its_own_line(a3, base, paper_gyro):
     line = res.accepted[1]
     assert line.evidence["harmonic"] == 3 and line.evidence["harmonic_of_hz"] == f1
     assert line.params["frequency_hz"] == pytest.approx(3 * f1, rel=1e-12)
+    # its centre is 3 f1 exactly, so its interval is 3 times the fundamental's
+    f1_lo, f1_hi = res.accepted[0].intervals["frequency_hz"]
+    assert line.intervals["frequency_hz"] == [3 * f1_lo, 3 * f1_hi]
+    assert f1_lo < f1 < f1_hi
     assert line.params["width_hz"] == pytest.approx(1 / (N * TAU0), rel=0.5)
     lo, hi = line.intervals["rms"]
     assert lo < 3 * paper_gyro.b / np.sqrt(2) < hi
