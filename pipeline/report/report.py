@@ -332,10 +332,14 @@ def _params(effect: dict) -> str:
 
 
 def _kind_text(record: dict) -> str:
-    """An effect's or candidate's kind, with the fundamental a harmonic line belongs to."""
+    """An effect's or candidate's kind, with the fundamental a harmonic line belongs to (or the
+    modelled line a fundamental found after it is the harmonic of)."""
     evidence = record.get("evidence") or {}
     order, f1 = evidence.get("harmonic"), evidence.get("harmonic_of_hz")
     harmonic = "" if order is None else f" (harmonic {order} of {_fmt(f1)} Hz)"
+    order, f_n = evidence.get("its_harmonic"), evidence.get("fundamental_of_hz")
+    if order is not None:
+        harmonic = f" (fundamental of {_fmt(f_n)} Hz, its harmonic {order})"
     return f"{record.get('kind')}{harmonic}"
 
 

@@ -245,3 +245,59 @@ def test_harmonic_trial_counts_one_parameter_and_holds_out_beside_its_fundamenta
     assert d.holdout["deviance_gain_heldout"] == pytest.approx([7.785, 16.967], rel=1e-3)
     without_fundamental = loop._holdout_column(ax, bare, d.trial.cand)
     assert not without_fundamental["holds"]
+
+
+def test_a_fundamental_found_after_its_stronger_third_harmonic_names_it(base, paper_gyro):
+    """Tones of 9 B at 0.0078 Hz and 15 B at 3 × that: the loop models the stronger one (a
+    sinusoid at 0.0234 Hz) and then the fundamental as a one-bin line labelled as the
+    fundamental whose third harmonic is modelled; the error falls 160 → 0.64."""
+    _rng, y = base(31)
+    t = np.arange(N) * TAU0
+    f1, b = 0.0078, paper_gyro.b
+    res = run(y + 9 * b * np.sin(2 * np.pi * f1 * t) + 15 * b * np.sin(2 * np.pi * 3 * f1 * t + 1))
+    assert [e.kind for e in res.accepted] == ["sinusoid", "narrowband"]
+    tone, line = res.accepted
+    bin_hz = 1 / (N * TAU0)
+    assert tone.params["frequency_hz"] == pytest.approx(3 * f1, abs=bin_hz / 4)
+    assert tone.params["amplitude"] == pytest.approx(15 * b, rel=0.05)
+    assert line.params["frequency_hz"] == pytest.approx(f1, abs=bin_hz / 4)
+    assert line.evidence["its_harmonic"] == 3
+    assert line.evidence["fundamental_of_hz"] == tone.params["frequency_hz"]
+    assert "harmonic" not in line.evidence
+    assert res.before.error == pytest.approx(159.9, rel=1e-3)
+    assert res.after.error == pytest.approx(0.641, rel=1e-3)
+
+
+def test_the_sinusoid_candidate_takes_the_spectrum_s_line_where_the_avar_s_has_none(
+    base, paper_gyro
+):
+    """A 10 B tone at 0.03 Hz: the block means' periodogram over the model's PSD peaks on its
+    bin (:func:`loop._spectrum_peak`, every second bin of 1/T: within 2/T); a sinusoid
+    candidate the AVAR search put at 0.006 Hz (where nothing is) gives way to the spectrum's,
+    which is significant, and marks where its frequency came from."""
+    _rng, y = base(33)
+    t = np.arange(N) * TAU0
+    y = y + 10 * paper_gyro.b * np.sin(2 * np.pi * 0.03 * t)
+    ax = loop._Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
+    state = loop._State(ax.avar, ax.y_d.copy(), None)
+    fit = state.fit(ax)
+    good = loop.goodness(fit, ax.tau, state.avar, ax.edf)
+    assert abs(loop._spectrum_peak(ax, state, fit) - 0.03) <= 2 / (N * TAU0)
+    whiten = loop._whitener(fit, state, ax, "")
+    fits = loop._column_fits(
+        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(0.006,)], 0, None, ax.dense_from
+    )
+    off = loop._column_candidate("sinusoid", (0.006,), fits[0][1], state, ax)
+    assert abs(off.params["frequency_hz"] / 0.03 - 1) > 0.5  # its periodogram band misses it
+    cand, chosen_fits, tone = loop._sinusoid_views(ax, state, (fit, good), whiten, off, fits)
+    assert cand.evidence["frequency_from"] == "spectrum"
+    assert cand.params["frequency_hz"] == pytest.approx(0.03, rel=1e-3)
+    assert chosen_fits is not fits and tone[0].p_value < 1e-3
+    assert loop._significance(ax, state, (fit, good), cand, tone) > 0
+    # the AVAR's own candidate at the line is kept: the spectrum's agrees with it
+    fits = loop._column_fits(
+        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(0.03,)], 0, None, ax.dense_from
+    )
+    near = loop._column_candidate("sinusoid", (0.03,), fits[0][1], state, ax)
+    kept, kept_fits, _ = loop._sinusoid_views(ax, state, (fit, good), whiten, near, fits)
+    assert kept is near and kept_fits is fits and kept.evidence["frequency_from"] == "avar"

@@ -339,3 +339,9 @@ def test_a_harmonic_line_names_its_fundamental() -> None:
     harmonic = {"kind": "narrowband", "evidence": {"harmonic": 3, "harmonic_of_hz": 0.5652609}}
     assert report._kind_text(harmonic) == "narrowband (harmonic 3 of 0.5653 Hz)"
     assert report._kind_text({"kind": "narrowband", "evidence": {}}) == "narrowband"
+    # a fundamental found after its stronger harmonic (a sinusoid at 3 f1) names it
+    fundamental = {
+        "kind": "narrowband",
+        "evidence": {"its_harmonic": 3, "fundamental_of_hz": 0.0235},
+    }
+    assert report._kind_text(fundamental) == "narrowband (fundamental of 0.0235 Hz, its harmonic 3)"
