@@ -72,8 +72,9 @@ AVAR_ONLY = frozenset({"sinusoid", "narrowband", "prefilter"})
 """AVAR terms whose acceptance the time-domain error does not judge (reported only).  The
 prefilter is outside its model; lines are in it since session 7 (a sinusoid projected out of
 the whitened series, a spread line in :func:`noise_psd`) — before, a modelled line stayed in the
-series and that error rose (a 3e-4 rad/s sinusoid at 0.02 Hz: 1.11 → 1.72).  Judging lines on
-it too is not done: it would change the loop's decisions, which were validated without it."""
+series and that error rose (a 3e-4 rad/s sinusoid at 0.02 Hz: 1.11 → 1.72).  Since session 17
+a sinusoid slow enough for its tone test is judged by it too (:func:`_time_judged`); spread
+lines and faster tones are not (their decisions were validated without it)."""
 SLOW_KINDS = frozenset({"ramp", "bias_step", "rate_ramp"})
 """Time-domain effects as slow as a random walk's wander over the record (a ramp, a step, a
 warm-up drift): their GLS test is whitened with K at the upper end of its :data:`SLOW_K_LEVEL`
@@ -1576,7 +1577,8 @@ def _error_reasons(e: ErrorChange | None) -> list[str]:
     materially (by more than χ²₁(0.95); the Allan-space one is held by :func:`_judge`), and at
     least one of the two must fall significantly (by at least χ²₁(0.95)) — slow corrections
     (temperature, step, warm-up) show their fall in the time domain, AVAR terms in Allan
-    space.  For :data:`AVAR_ONLY` terms only the Allan-space error is judged; for
+    space.  For :data:`AVAR_ONLY` terms only the Allan-space error is judged (a slow sinusoid
+    excepted: :func:`_time_judged`); for
     :data:`RAMP_KINDS` only the rises."""
     if e is None:
         return []

@@ -17,9 +17,10 @@ Three levels:
 * the hold-out of a time-domain correction (:meth:`effects.Candidate.holdout`) on a series whose
   coupling differs between the even and odd segments, and :func:`loop.close_loop` on 3.6 h
   synthetic axes where a sinusoid is present at different amplitudes in the two halves, is just
-  under the ΔBIC threshold but significant by its tone GLS test (and, weaker, significant there
-  while the Allan error does not fall), or a temperature coupling is significant before and not
-  after the family-wise Bonferroni factor.
+  under the ΔBIC threshold but significant by its tone GLS test (weaker: significant there, its
+  fall shown by the time-domain error alone; weaker still: found by the spectrum, with no line
+  above its band), or a temperature coupling is significant before and not after the
+  family-wise Bonferroni factor.
 
 The end-to-end cases are tuned (amplitude of the effect, seed 11): each asserts the condition
 that makes it the case it is (e.g. 2 < ΔBIC < 10) before the decision, so a change of the model
@@ -664,19 +665,32 @@ def test_sinusoid_under_the_delta_bic_threshold_is_accepted_by_its_tone_test(run
     assert hold["holds"] is True and max(hold["power_ratio_heldout"]) < 0.95
 
 
-def test_sinusoid_significant_by_its_tone_test_alone_still_needs_the_allan_error_to_fall(
-    run_axis,
-):
-    """Amplitude 8e-5 rad/s: the tone test is significant (p ~1e-9) and holds out, but the Allan
-    error falls by only 3.0 φ: the AVAR view does not see the tone, and a sinusoid is an AVAR
-    term, so it is rejected for that alone."""
-    rec = _candidate(run_axis("sinusoid", 8e-5), "sinusoid")
+def test_sinusoid_significant_by_its_tone_test_alone_falls_in_the_time_domain(run_axis):
+    """Amplitude 8e-5 rad/s: ΔBIC < 0 and the Allan error falls by only 3.0 φ (< χ²₁(0.95)),
+    but the tone test is significant (p ~1e-9) and holds out, and the time-domain error — which
+    judges a sinusoid its tone test reads, its sine and cosine projected out — falls by 46:
+    accepted, its amplitude within 10 % (the AVAR's)."""
+    res = run_axis("sinusoid", 8e-5)
+    assert [e.kind for e in res.accepted] == ["sinusoid"]
+    ev = res.accepted[0].evidence
+    assert ev["avar_delta_bic"] < 0 and ev["tone_gls"]["p_value_bonferroni"] < 1e-3
+    assert ev["allan_error_fall_chi2"] < CHI2_95 < ev["time_domain_deviance_fall"]
+    assert ev["time_domain_error_judged"] is True
+    assert res.accepted[0].params["amplitude"] == pytest.approx(8e-5, rel=0.1)
+
+
+def test_sinusoid_from_the_spectrum_with_no_line_above_its_band_is_rejected_for_it(run_axis):
+    """Amplitude 6.5e-5 rad/s: the AVAR search misses the tone, the block means' spectrum over
+    the model's PSD finds it (``frequency_from`` "spectrum") and its tone test is significant
+    (p ~3e-6), but the periodogram's band around it (Fisher's test over ×/÷ 1.6) does not
+    single it out (p 0.0075): rejected for that alone."""
+    rec = _candidate(run_axis("sinusoid", 6.5e-5), "sinusoid")
     ev = rec.evidence
-    assert ev["avar_delta_bic"] < 10 and ev["tone_gls"]["p_value_bonferroni"] < 1e-3
+    assert ev["frequency_from"] == "spectrum"
+    assert rec.params["frequency_hz"] == pytest.approx(F0, rel=1e-3)
+    assert ev["tone_gls"]["p_value_bonferroni"] < 1e-3 <= ev["line_p_value"]
     assert ev["holdout"]["holds"] is True
-    assert rec.reason == (
-        "neither error falls significantly (Allan 1.01 -> 0.842, deviance fall 3.0; < 3.84)"
-    )
+    assert rec.reason == "no periodogram line above the band's noise (p 0.00754 >= 0.001)"
 
 
 def test_sinusoid_in_one_half_only_does_not_hold_out_of_sample(run_axis):
