@@ -1001,6 +1001,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
             time_new,
             _time_judged(cand),
             cand.kind not in RAMP_KINDS | SPIKE_KINDS,
+            cand.kind != "sinusoid",
         )
 
     trials = []
@@ -1162,7 +1163,11 @@ def _time_judged(cand: effects.Candidate) -> bool:
     projected sine and cosine: that error's fall is the tone's evidence, as the Allan error's
     is its bump's.  Measured: tones of 15 B at 0.0078 and 0.0234 Hz on 3.6 h, the stronger one
     alone lowers the Allan error 78 → 55, a deviance fall of only 3.8 φ beside the other line's
-    misfit, where its tone test's Wald χ² is in the hundreds."""
+    misfit, where its tone test's Wald χ² is in the hundreds.  Its rise is not judged
+    (``rise_judged``): with a second line still in the series, the model refitted without the
+    first line's bump has less low-frequency noise to whiten the second with (measured: a
+    sinusoid at 0.0078 Hz with its third harmonic unmodelled, the time-domain deviance +600;
+    the fundamental then entered as a one-bin narrowband line instead)."""
     if cand.kind == "sinusoid":
         return "tone_gls" in cand.evidence
     return cand.kind not in AVAR_ONLY | SPIKE_KINDS
@@ -1461,6 +1466,9 @@ class ErrorChange:
     """False for AVAR-only terms the time-domain error cannot represent (:data:`AVAR_ONLY`)."""
     fall_judged: bool = True
     """False for corrections neither error can show (:data:`RAMP_KINDS`)."""
+    rise_judged: bool = True
+    """False where only the time-domain error's fall counts (a slow sinusoid:
+    :func:`_time_judged`)."""
 
     @classmethod
     def between(
@@ -1471,6 +1479,7 @@ class ErrorChange:
         time_new: TimeFit,
         time_judged: bool = True,
         fall_judged: bool = True,
+        rise_judged: bool = True,
     ) -> ErrorChange:
         """From the two fits (same τ points) and their :func:`time_domain_fit`."""
         return cls(
@@ -1482,6 +1491,7 @@ class ErrorChange:
             time_old.deviance - time_new.deviance,
             time_judged,
             fall_judged,
+            rise_judged,
         )
 
     def as_evidence(self) -> dict:
@@ -1495,6 +1505,7 @@ class ErrorChange:
             "time_domain_deviance_fall": self.time_fall,
             "time_domain_error_judged": self.time_judged,
             "error_fall_judged": self.fall_judged,
+            "time_domain_rise_judged": self.time_judged and self.rise_judged,
         }
 
 
@@ -1584,7 +1595,7 @@ def _error_reasons(e: ErrorChange | None) -> list[str]:
         return []
     reasons = []
     time_fall = e.time_fall if e.time_judged else -np.inf
-    if e.time_judged and e.time_fall < -CHI2_95:
+    if e.time_judged and e.rise_judged and e.time_fall < -CHI2_95:
         reasons.append(
             f"the time-domain error rises ({e.time_before:.3g} -> {e.time_after:.3g}; "
             f"deviance +{-e.time_fall:.1f} > {CHI2_95:.2f})"
