@@ -31,6 +31,7 @@ The noise is the ``paper_gyro`` fixture (tests/model/conftest.py).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import cache
 
 import numpy as np
@@ -244,6 +245,20 @@ def test_an_avar_only_term_is_judged_on_the_allan_error_alone():
         False,
         "neither error falls significantly (Allan 0.9 -> 0.8, deviance fall 3.8; < 3.84)",
     )
+
+
+def test_a_slow_sinusoid_s_time_domain_error_counts_for_its_fall_only():
+    """A sinusoid its tone test reads: a fall of the time-domain error is enough, a rise (the
+    other lines' whitening under the refitted PSD) does not reject it; the report says which."""
+    trial, _ = _with_errors(0.0, 0.0, kind="sinusoid")
+    for time_fall, accept in ((CHI2_95, True), (3.8, False), (-500.0, False)):
+        change = ErrorChange(0.9, 0.8, 1.0, 1.25, 1.05, time_fall, True, True, False)
+        d = _decide(replace(trial, errors=change))
+        assert d.accept is accept
+        assert accept or d.reason.startswith("neither error falls significantly (Allan 0.9")
+    evidence = change.as_evidence()
+    assert evidence["time_domain_error_judged"] and not evidence["time_domain_rise_judged"]
+    assert ErrorChange(0.9, 0.8, 1.0, 1.25, 1.05, 0.0).as_evidence()["time_domain_rise_judged"]
 
 
 def test_a_ramp_needs_no_fall_of_either_error_but_may_not_raise_the_time_domain_one():
