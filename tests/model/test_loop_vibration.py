@@ -279,36 +279,80 @@ def test_a_fundamental_found_after_its_stronger_third_harmonic_names_it(
         assert tone.evidence["allan_error_fall_chi2"] < 3.84
 
 
+def _views(y, f_avar):
+    """(axis, state, (fit, goodness), whitener, :func:`loop._sinusoid_views` of an AVAR
+    candidate put at ``f_avar`` Hz, and that candidate's fits)."""
+    ax = loop._Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
+    state = loop._State(ax.avar, ax.y_d.copy(), None)
+    fit = state.fit(ax)
+    current = (fit, loop.goodness(fit, ax.tau, state.avar, ax.edf))
+    whiten = loop._whitener(fit, state, ax, "")
+    fits = loop._column_fits(
+        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(f_avar,)], 0, None, ax.dense_from
+    )
+    cand = loop._column_candidate("sinusoid", (f_avar,), fits[0][1], state, ax)
+    return (
+        ax,
+        state,
+        current,
+        cand,
+        fits,
+        loop._sinusoid_views(ax, state, current, whiten, cand, fits),
+    )
+
+
 def test_the_sinusoid_candidate_takes_the_spectrum_s_line_where_the_avar_s_has_none(
     base, paper_gyro
 ):
     """A 10 B tone at 0.03 Hz: the block means' periodogram over the model's PSD peaks on its
     bin (:func:`loop._spectrum_peak`, every second bin of 1/T: within 2/T); a sinusoid
     candidate the AVAR search put at 0.006 Hz (where nothing is) gives way to the spectrum's,
-    which is significant, and marks where its frequency came from."""
+    which is significant, and marks where its frequency came from; one put at the line is
+    kept.  Beside a 20 B tone at 0.35 Hz (above a fifth of the 1 Hz block rate, outside the
+    spectrum's band) a 2 B one at 0.03 Hz is still the spectrum's peak, and the AVAR's candidate
+    at the stronger tone is kept over it (margins 536 and 183)."""
     _rng, y = base(33)
     t = np.arange(N) * TAU0
-    y = y + 10 * paper_gyro.b * np.sin(2 * np.pi * 0.03 * t)
-    ax = loop._Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
-    state = loop._State(ax.avar, ax.y_d.copy(), None)
-    fit = state.fit(ax)
-    good = loop.goodness(fit, ax.tau, state.avar, ax.edf)
-    assert abs(loop._spectrum_peak(ax, state, fit) - 0.03) <= 2 / (N * TAU0)
-    whiten = loop._whitener(fit, state, ax, "")
-    fits = loop._column_fits(
-        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(0.006,)], 0, None, ax.dense_from
-    )
-    off = loop._column_candidate("sinusoid", (0.006,), fits[0][1], state, ax)
+    tone = 10 * paper_gyro.b * np.sin(2 * np.pi * 0.03 * t)
+    ax, state, current, off, fits, (cand, chosen_fits, test) = _views(y + tone, 0.006)
+    assert abs(loop._spectrum_peak(ax, state, current[0]) - 0.03) <= 2 / (N * TAU0)
     assert abs(off.params["frequency_hz"] / 0.03 - 1) > 0.5  # its periodogram band misses it
-    cand, chosen_fits, tone = loop._sinusoid_views(ax, state, (fit, good), whiten, off, fits)
     assert cand.evidence["frequency_from"] == "spectrum"
     assert cand.params["frequency_hz"] == pytest.approx(0.03, rel=1e-3)
-    assert chosen_fits is not fits and tone[0].p_value < 1e-3
-    assert loop._significance(ax, state, (fit, good), cand, tone) > 0
+    assert chosen_fits is not fits and test[0].p_value < 1e-3
+    assert loop._significance(ax, state, current, cand, test) > 0
     # the AVAR's own candidate at the line is kept: the spectrum's agrees with it
-    fits = loop._column_fits(
-        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(0.03,)], 0, None, ax.dense_from
-    )
-    near = loop._column_candidate("sinusoid", (0.03,), fits[0][1], state, ax)
-    kept, kept_fits, _ = loop._sinusoid_views(ax, state, (fit, good), whiten, near, fits)
+    _, _, _, near, fits, (kept, kept_fits, _) = _views(y + tone, 0.03)
     assert kept is near and kept_fits is fits and kept.evidence["frequency_from"] == "avar"
+    # a stronger tone above the spectrum's band: the AVAR's candidate there is kept
+    both = y + tone / 5 + 20 * paper_gyro.b * np.sin(2 * np.pi * 0.35 * t)
+    ax, state, current, strong, fits, (kept, kept_fits, test) = _views(both, 0.35)
+    assert abs(loop._spectrum_peak(ax, state, current[0]) - 0.03) <= 2 / (N * TAU0)
+    assert kept is strong and kept_fits is fits and test is None  # 0.35 Hz: above the GLS band
+    assert kept.params["frequency_hz"] == pytest.approx(0.35, rel=1e-3)
+
+
+def test_the_sinusoid_search_band_ends_where_the_fit_starts(base, paper_gyro):
+    """With the fit starting at τ = 20 s, the sinusoid search reaches 1.6 × 0.371/20 Hz =
+    0.0297 Hz: the spectrum's peak ignores a stronger tone at 0.035 Hz beyond it, and the tone
+    test's Bonferroni count is the Fourier frequencies of the record from the search's lowest
+    frequency / 1.6 to that edge (below the GLS's Nyquist, 1/26 Hz)."""
+    _rng, y = base(34)
+    t = np.arange(N) * TAU0
+    b = paper_gyro.b
+    y = y + 6 * b * np.sin(2 * np.pi * 0.02 * t) + 20 * b * np.sin(2 * np.pi * 0.035 * t)
+    whole = loop._Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
+    ax = loop._with_start(whole, 20.0)
+    state = loop._State(ax.avar, ax.y_d.copy(), None)
+    fit = state.fit(whole)  # the PSD the periodogram is read against: the whole range's fit
+    assert abs(loop._spectrum_peak(ax, state, fit) - 0.02) <= 2 / (N * TAU0)
+    assert abs(loop._spectrum_peak(whole, state, fit) - 0.035) <= 2 / (N * TAU0)
+    fits = loop._column_fits(
+        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(0.02,)], 0, None, ax.dense_from
+    )
+    cand = loop._column_candidate("sinusoid", (0.02,), fits[0][1], state, ax)
+    tone, whiten = loop._tone_test(ax, state, loop._whitener(fit, state, ax, ""), cand)
+    assert 1.6 * 0.371 / 20 < 0.5 / whiten.span
+    f_min = 0.371 / (ax.tau[-1] / 2)
+    record_s = len(state.y_d) * ax.dt
+    assert tone.n_options == int(np.ceil((1.6 * 0.371 / 20 - f_min / 1.6) * record_s))
