@@ -611,6 +611,20 @@ def _column_profile(
     return out
 
 
+def _sinusoid_frequencies(ax: _Axis) -> np.ndarray:
+    """The sinusoid search's frequencies (Hz): 60 whose AVAR peak (0.371/f0) lies in the fitted
+    τ range, from its start to half the longest τ."""
+    return 0.371 / np.geomspace(max(ax.tau[0], ax.tau_min), ax.tau[-1] / 2, 60)
+
+
+def _sinusoid_band(ax: _Axis) -> tuple[float, float]:
+    """(lowest, highest) frequency (Hz) a sinusoid candidate can take: the search's grid
+    (:func:`_sinusoid_frequencies`) widened by the periodogram band's factor 1.6 either side
+    (:func:`_column_candidate` re-centres on the strongest line within it)."""
+    freqs = _sinusoid_frequencies(ax)
+    return float(freqs.min() / 1.6), float(1.6 * freqs.max())
+
+
 def _grids(ax: _Axis, state: _State) -> dict[str, list[tuple]]:
     """Shape parameters searched per kind: sinusoid frequencies (Hz) and Gauss–Markov Tc (s)
     whose AVAR peak (0.371/f0, 1.89 Tc) lies in the fitted τ range; for a narrowband line every
@@ -619,7 +633,7 @@ def _grids(ax: _Axis, state: _State) -> dict[str, list[tuple]]:
     :func:`_narrowband_refine`); prefilters of each
     family (:data:`effects.PREFILTERS`) from a quarter sample to 20 samples long."""
     tau, tau_min, tau0 = ax.tau, ax.tau_min, ax.sig.tau0
-    freqs = 0.371 / np.geomspace(max(tau[0], tau_min), tau[-1] / 2, 60)
+    freqs = _sinusoid_frequencies(ax)
     lines = [s[0] for k, s in state.effect_parameters.values() if k == "narrowband"]
     free = [f for f in freqs if all(abs(f / c - 1) > 0.1 for c in lines)]
     nyquist = 0.5 / tau0
@@ -1135,6 +1149,12 @@ def _significance(
     test's 2 ln(α / p) when larger."""
     fit_new = state.with_column("sinusoid", cand).fit(ax)
     dbic, _ = _judge("sinusoid", fit_new, *current, cand.n_params, ax.tau, state.avar, ax.edf)
+    return _column_margin(dbic, tone)
+
+
+def _column_margin(dbic: float, tone: tuple[effects.Candidate, effects.Whitener] | None) -> float:
+    """An AVAR-column candidate's evidence beyond its threshold (deviance units, ≥ 0:
+    significant): ΔBIC − 10, or a sinusoid's tone test's 2 ln(α / p) when larger."""
     return max(dbic - DELTA_BIC, -np.inf if tone is None else _p_margin(tone[0].p_value))
 
 
@@ -1145,8 +1165,8 @@ def _spectrum_peak(ax: _Axis, state: _State, fit: ieee952.CompositeFit) -> float
     sinusoid search's band (:func:`_grids`, ×/÷ 1.6) below a fifth of the block rate (the
     block means' spectrum; a full-rate FFT each round would cost more than the loop).  ``None``
     when that band is empty."""
-    freqs = [s[0] for s in _grids(ax, state)["sinusoid"]]
-    f_lo, f_hi = min(freqs) / 1.6, min(1.6 * max(freqs), 0.2 / ax.dt)
+    f_lo, f_top = _sinusoid_band(ax)
+    f_hi = min(f_top, 0.2 / ax.dt)
     if f_hi <= f_lo:
         return None
     f, power = effects.hann_periodogram(state.y_d, ax.dt, f_lo, f_hi)
@@ -1201,13 +1221,10 @@ def _column_trial(
     )
     dbic -= choice_penalty
     cand.evidence["avar_delta_bic"] = dbic
-    margin = dbic - DELTA_BIC
+    margin = _column_margin(dbic, tone)
     holdout = partial(_holdout_column, ax, state, cand)
-    if tone is not None:
-        tone_margin = _p_margin(tone[0].p_value)
-        if margin < 0 <= tone_margin:
-            holdout = partial(tone[0].holdout, tone[1], state.y_d, N_SEGMENTS)
-        margin = max(margin, tone_margin)
+    if tone is not None and dbic - DELTA_BIC < 0 <= margin:  # significant by its tone alone
+        holdout = partial(tone[0].holdout, tone[1], state.y_d, N_SEGMENTS)
     if margin >= 0:  # costly: significant ones only
         cand.intervals |= _column_profile(
             cand.kind, fits, state.avar, ax.edf, (ax.sig.tau0, ax.n_terms)
@@ -1241,8 +1258,8 @@ def _tone_test(
     nyquist = 0.5 / whiten.span
     if f0 >= nyquist:
         return None
-    freqs = [s[0] for s in _grids(ax, state)["sinusoid"]]
-    band_hz = min(1.6 * max(freqs), nyquist) - min(freqs) / 1.6
+    f_lo, f_top = _sinusoid_band(ax)
+    band_hz = min(f_top, nyquist) - f_lo
     n_freq = max(1, int(np.ceil(band_hz * len(state.y_d) * ax.dt)))
     tone = effects.tone_candidate(state.y_d, ax.dt, f0, whiten, n_freq)
     cand.evidence["tone_gls"] = dict(tone.evidence)
@@ -1335,13 +1352,14 @@ def _harmonic_trial(
     cand = _column_candidate("narrowband", spec, fit_new, state, ax)
     cand.n_params = 1
     cand.evidence["harmonic_orders_tried"] = len(specs)
-    fundamental = [
-        state.frequency_intervals.get(n)
-        for n, (_, s) in state.effect_parameters.items()
-        if s[0] == cand.evidence["harmonic_of_hz"]
-    ]
-    if fundamental and fundamental[0]:  # the centre is n·f1 exactly: its interval n times f1's
-        cand.intervals["frequency_hz"] = [cand.evidence["harmonic"] * f for f in fundamental[0]]
+    f1 = cand.evidence["harmonic_of_hz"]
+    interval = next(
+        (state.frequency_intervals.get(n) for n, (_, s) in state.effect_parameters.items()
+         if s[0] == f1),
+        None,
+    )  # fmt: skip
+    if interval:  # the centre is n·f1 exactly: its interval n times f1's
+        cand.intervals["frequency_hz"] = [cand.evidence["harmonic"] * f for f in interval]
     penalty = 2.0 * np.log(len(specs))
     trial = _column_trial(ax, state, current, name, cand, [(spec, fit_new)], errors, penalty)
     return replace(trial, kind=f"{name} harmonic")  # its own record next to the searched line's
