@@ -204,18 +204,18 @@ def test_md_text_escapes_markup():
     assert md_text("a|b`c`<script>\n[x](y)") == r"a|b\`c\`\<script\> \[x\](y)"
 
 
-def test_the_client_plans_the_figures_without_importing_matplotlib():
+def test_the_client_plans_the_figures_without_importing_matplotlib(tmp_path):
     """The fleet's client writes the report while its workers draw the figures: importing
     matplotlib there (~1 s) would delay the figure jobs at the end of every fleet."""
     import subprocess
     import sys
 
     code = (
-        "import sys, tempfile; from pathlib import Path; import imupipe.fleet.run; "
+        "import sys; from pathlib import Path; import imupipe.fleet.run; "
         "from imupipe.fleet.report import write_fleet_report; "
         "from imupipe.fleet.task import UnitOutcome; jobs = []; "
         "u = UnitOutcome('a', 'a.mcap', 'failed', 'not MCAP', None, None, 0.1, 'h:1'); "
-        "write_fleet_report([u], Path(tempfile.mkdtemp()), rrd=False, "
+        f"write_fleet_report([u], Path({str(tmp_path)!r}), rrd=False, "
         "mapper=lambda f, js: jobs.extend(js) or [None] * len(js)); "
         "print([name for name, _ in jobs], 'matplotlib' in sys.modules)"
     )

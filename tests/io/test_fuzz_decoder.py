@@ -10,7 +10,6 @@ reproducible); the count actually run is printed (``pytest -s``).
 from __future__ import annotations
 
 import io
-import tempfile
 from collections import Counter
 from pathlib import Path
 
@@ -44,7 +43,6 @@ FUZZ = settings(
 )
 T0 = 1_700_000_000_000_000_000
 RAN: Counter[str] = Counter()
-WORK = Path(tempfile.mkdtemp(prefix="imupipe-fuzz-"))
 
 
 def frames(n: int, start: int = 0) -> FrameBlock:
@@ -72,9 +70,15 @@ def recording(compression: str) -> tuple[bytes, int]:
 FILES = {c: recording(c) for c in ("zstd", "lz4", "")}
 
 
-def only_clean_errors(data: bytes, kind: str) -> None:
+@pytest.fixture(scope="module")
+def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One folder for every case's file (pytest keeps the last three runs' folders only)."""
+    return tmp_path_factory.mktemp("fuzz")
+
+
+def only_clean_errors(work: Path, data: bytes, kind: str) -> None:
     """Decode and describe ``data``; anything but success or ImupipeError fails the test."""
-    path = WORK / "fuzz.mcap"
+    path = work / "fuzz.mcap"
     path.write_bytes(data)
     for stage in (decode, describe):
         try:
@@ -97,9 +101,9 @@ compression = st.sampled_from(sorted(FILES))
 
 @FUZZ
 @given(compression, st.floats(0, 1, exclude_max=True))
-def test_truncated_anywhere(comp: str, where: float) -> None:
+def test_truncated_anywhere(work: Path, comp: str, where: float) -> None:
     data, _ = FILES[comp]
-    only_clean_errors(data[: int(where * len(data))], "truncation")
+    only_clean_errors(work, data[: int(where * len(data))], "truncation")
 
 
 def test_truncation_count() -> None:
@@ -113,12 +117,14 @@ def test_truncation_count() -> None:
         st.tuples(st.floats(0, 1, exclude_max=True), st.integers(0, 7)), min_size=1, max_size=8
     ),
 )
-def test_bit_flips_in_the_data_section(comp: str, flips: list[tuple[float, int]]) -> None:
+def test_bit_flips_in_the_data_section(
+    work: Path, comp: str, flips: list[tuple[float, int]]
+) -> None:
     data, start = FILES[comp]
     buf = bytearray(data)
     for where, bit in flips:
         buf[start + int(where * (len(buf) - start))] ^= 1 << bit
-    only_clean_errors(bytes(buf), "bit flip")
+    only_clean_errors(work, bytes(buf), "bit flip")
 
 
 def test_bit_flip_count() -> None:
@@ -127,10 +133,12 @@ def test_bit_flip_count() -> None:
 
 @FUZZ
 @given(compression, st.floats(0, 1, exclude_max=True), st.binary(min_size=1, max_size=64))
-def test_random_bytes_overwrite_the_data_section(comp: str, where: float, junk: bytes) -> None:
+def test_random_bytes_overwrite_the_data_section(
+    work: Path, comp: str, where: float, junk: bytes
+) -> None:
     data, start = FILES[comp]
     at = start + int(where * (len(data) - start))
-    only_clean_errors(data[:at] + junk + data[at + len(junk) :], "overwrite")
+    only_clean_errors(work, data[:at] + junk + data[at + len(junk) :], "overwrite")
 
 
 def test_overwrite_count() -> None:
@@ -139,8 +147,8 @@ def test_overwrite_count() -> None:
 
 @FUZZ
 @given(st.booleans(), st.binary(max_size=2048))
-def test_random_files(with_magic: bool, junk: bytes) -> None:
-    only_clean_errors((b"\x89MCAP0\r\n" if with_magic else b"") + junk, "random file")
+def test_random_files(work: Path, with_magic: bool, junk: bytes) -> None:
+    only_clean_errors(work, (b"\x89MCAP0\r\n" if with_magic else b"") + junk, "random file")
 
 
 def test_random_file_count() -> None:
@@ -181,11 +189,11 @@ def producer_file(schema: str, encoding: str, payloads: list[bytes], chunked: bo
     st.booleans(),
 )
 def test_random_schemas_and_records(
-    schema: str, encoding: str, payloads: list[tuple[bytes, bytes]], chunked: bool
+    work: Path, schema: str, encoding: str, payloads: list[tuple[bytes, bytes]], chunked: bool
 ) -> None:
     """Messages of at least a sensor_msgs/Imu's size, random bytes behind a CDR header or not."""
     data = producer_file(schema, encoding, [a + b for a, b in payloads], chunked)
-    only_clean_errors(data, "random schema")
+    only_clean_errors(work, data, "random schema")
 
 
 def test_random_schema_count() -> None:
@@ -199,7 +207,7 @@ def test_random_schema_count() -> None:
     st.dictionaries(st.sampled_from(sorted(DeviceConfig().to_metadata())), st.text(max_size=8)),
 )
 def test_short_messages_and_bad_metadata(
-    schema: str, payloads: list[bytes], meta: dict[str, str]
+    work: Path, schema: str, payloads: list[bytes], meta: dict[str, str]
 ) -> None:
     buf = io.BytesIO()
     w = Writer(buf)
@@ -210,7 +218,7 @@ def test_short_messages_and_bad_metadata(
     for i, p in enumerate(payloads):
         w.add_message(cid, log_time=T0 + i, data=p, publish_time=T0 + i)
     w.finish()
-    only_clean_errors(buf.getvalue(), "short message")
+    only_clean_errors(work, buf.getvalue(), "short message")
 
 
 def test_short_message_count() -> None:
