@@ -23,6 +23,8 @@ Two families (issue 4):
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numba
@@ -242,8 +244,7 @@ class Whitener:
             self.inv_chol = _innovations(gamma)
         else:
             cov = _summed_covariance(gamma, self.blocks)
-            chol = linalg.cholesky(cov, lower=True)
-            self.inv_chol = linalg.solve_triangular(chol, np.eye(len(cov)), lower=True)
+            self.inv_chol = _inverse_cholesky(cov)
         # whitened constant difference: a linear rate ramp, the model's R term (nuisance)
         self.drift = self.inv_chol @ np.diff(self.blocks).astype(float)
 
@@ -255,6 +256,44 @@ class Whitener:
     def __call__(self, v: np.ndarray) -> np.ndarray:
         """Whitened differences of the observed coarse block means of ``v``."""
         return self.inv_chol @ np.diff(self.coarse(v)[self.blocks], axis=0)
+
+
+def _inverse_cholesky(cov: np.ndarray) -> np.ndarray:
+    """L⁻¹ for the lower Cholesky factor L of ``cov`` (LAPACK potrf, then trtri: the inverse of
+    a triangular matrix in m³/3 flops, half of solving L X = I column by column)."""
+    chol = linalg.cholesky(cov, lower=True)  # its upper triangle zeroed
+    inv, info = linalg.lapack.dtrtri(chol, lower=1, overwrite_c=1)
+    if info != 0:  # a zero pivot: potrf would have refused the matrix first
+        raise linalg.LinAlgError(f"triangular inverse failed (LAPACK dtrtri info {info})")
+    return inv
+
+
+WHITENERS_KEPT = 4
+"""Whiteners :func:`whitener` keeps (the loop builds the same one again a round later: the
+model a candidate's errors were scored with becomes the next round's model; ~12 % of the
+constructions on the real recordings, each an O(m³) Cholesky when blocks are left out, ~8 MB
+each)."""
+
+
+def whitener(psd: NoisePsd, n: int, dt: float, masked: np.ndarray | None = None) -> Whitener:
+    """The :class:`Whitener` of these arguments, reused when one of the last
+    :data:`WHITENERS_KEPT` had them all (equal PSD, length, block and mask); its arrays are
+    read-only."""
+    if masked is None:
+        return _kept_whitener(psd, n, dt, None)
+    masked = np.ascontiguousarray(masked)
+    return _kept_whitener(psd, n, dt, (masked.dtype.str, masked.shape, masked.tobytes()))
+
+
+@functools.lru_cache(maxsize=WHITENERS_KEPT)
+def _kept_whitener(
+    psd: NoisePsd, n: int, dt: float, masked: tuple[str, tuple[int, ...], bytes] | None
+) -> Whitener:
+    mask = None if masked is None else np.frombuffer(masked[2], masked[0]).reshape(masked[1])
+    made = Whitener(psd, n, dt, mask)
+    for array in (made.inv_chol, made.drift, made.blocks):
+        array.flags.writeable = False
+    return made
 
 
 MAX_FILLED_FRACTION = 0.01
@@ -288,18 +327,16 @@ def _summed_covariance(gamma: np.ndarray, blocks: np.ndarray) -> np.ndarray:
     (stationarity: Var(Sₚ − S_q) = C(|p − q|)), C(k) = Var Sₖ = Σ_{|l|<k} (k − |l|) γ(|l|); the
     four corners of each rectangle leave ½[C(|hᵢ − lⱼ|) + C(|lᵢ − hⱼ|) − C(|hᵢ − hⱼ|) −
     C(|lᵢ − lⱼ|)] (l, h: the blocks' starts and ends) — O(m) to tabulate C instead of the
-    O(m²) two-dimensional cumulative sum of Γ."""
+    O(m²) two-dimensional cumulative sum of Γ.  Block i ends where block i + 1 starts, so the
+    four are shifted views of one table C(|bᵢ − bⱼ|) over the blocks b (one gather, not four).
+    """
     m = len(gamma)
     increments = np.empty(m + 1)  # C(k) − C(k − 1) = γ(0) + 2 Σ_{0<l<k} γ(l)
     increments[0] = 0.0
     increments[1:] = 2 * np.cumsum(gamma) - gamma[0]
     var_sum = np.cumsum(increments)
-    lo, hi = blocks[:-1], blocks[1:]
-
-    def c(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return var_sum[np.abs(a[:, None] - b[None, :])]
-
-    return 0.5 * (c(hi, lo) + c(lo, hi) - c(hi, hi) - c(lo, lo))
+    c = var_sum[np.abs(blocks[:, None] - blocks[None, :])]  # (hᵢ, lⱼ) = (bᵢ₊₁, bⱼ)
+    return 0.5 * (c[1:, :-1] + c[:-1, 1:] - c[1:, 1:] - c[:-1, :-1])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -877,7 +914,21 @@ ROLLOFF_BANDS = ((0.05, 0.2), (0.4, 0.5))
 ROLLOFF_SEGMENT = 256
 
 
-def psd_rolloff(y: np.ndarray, tau0: float) -> dict[str, float]:
+def welch_psd(y: np.ndarray, tau0: float, seg: int) -> tuple[np.ndarray, np.ndarray]:
+    """Welch's PSD (Hann, 50 % overlap; Welch 1967) of the first :data:`PSD_MAX_SAMPLES`
+    samples of ``y`` (sampled every ``tau0`` s) in segments of ``seg``: frequencies (Hz) and
+    one-sided PSD (units² / Hz)."""
+    from scipy import signal  # ~0.5 s to import; most analyses never need a Welch PSD
+
+    n = min(len(y), PSD_MAX_SAMPLES)
+    return signal.welch(np.asarray(y[:n], dtype=float), fs=1.0 / tau0, nperseg=seg)
+
+
+Welch = Callable[[int], tuple[np.ndarray, np.ndarray]]
+"""A series' :func:`welch_psd` by segment length (kept by a caller that asks more than once)."""
+
+
+def psd_rolloff(y: np.ndarray, tau0: float, welch: Welch | None = None) -> dict[str, float]:
     """The spectrum's view of a prefilter: the mean Welch PSD (Hann, :data:`ROLLOFF_SEGMENT`
     samples, 50 % overlap; Welch 1967) of the near-Nyquist band over that of the mid band
     (:data:`ROLLOFF_BANDS`), over the first :data:`PSD_MAX_SAMPLES` samples at most.
@@ -887,12 +938,9 @@ def psd_rolloff(y: np.ndarray, tau0: float) -> dict[str, float]:
     standard error ≈ √(1/(K b_mid) + 1/(K b_high)) (conservative for the overlap's correlation
     ignored only to first order); ``p_value``: one-sided normal P(no roll-off).
     """
-    from scipy import signal  # ~0.5 s to import; most analyses never need a Welch PSD
-
     n = min(len(y), PSD_MAX_SAMPLES)
-    f, pxx = signal.welch(
-        np.asarray(y[:n], dtype=float), fs=1.0 / tau0, nperseg=min(ROLLOFF_SEGMENT, n)
-    )
+    seg = min(ROLLOFF_SEGMENT, n)
+    f, pxx = welch(seg) if welch is not None else welch_psd(y, tau0, seg)
     fs = 1.0 / tau0
     (m_lo, m_hi), (h_lo, h_hi) = ROLLOFF_BANDS
     mid = (f >= m_lo * fs) & (f <= m_hi * fs)
@@ -907,7 +955,13 @@ def psd_rolloff(y: np.ndarray, tau0: float) -> dict[str, float]:
     }
 
 
-def band_excess(y: np.ndarray, tau0: float, f0: float, width_hz: float) -> dict[str, float]:
+def band_excess(
+    y: np.ndarray,
+    tau0: float,
+    f0: float,
+    width_hz: float,
+    welch: Welch | None = None,
+) -> dict[str, float]:
     """The spectrum's view of a spread line at ``f0`` ± ``width_hz`` (Hz): the mean Welch PSD
     (Hann, 50 % overlap; Welch 1967) within |f − f0| ≤ w over that of its shoulders
     2w ≤ |f − f0| ≤ 4w, w = max(``width_hz``, 1.5 bins).
@@ -921,9 +975,7 @@ def band_excess(y: np.ndarray, tau0: float, f0: float, width_hz: float) -> dict[
     n = min(len(y), PSD_MAX_SAMPLES)
     seg = int(np.clip(2 ** np.round(np.log2(2.0 / (width_hz * tau0))), 64, max(64, n // 8)))
     seg = min(seg, n)
-    from scipy import signal  # imported when needed: see psd_rolloff
-
-    f, pxx = signal.welch(np.asarray(y[:n], dtype=float), fs=1.0 / tau0, nperseg=seg)
+    f, pxx = welch(seg) if welch is not None else welch_psd(y, tau0, seg)
     w = max(width_hz, 1.5 / (seg * tau0))
     dist = np.abs(f - f0)
     line, shoulder = dist <= w, (dist >= 2 * w) & (dist <= 4 * w) & (f > 0)

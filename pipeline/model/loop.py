@@ -423,6 +423,14 @@ class _Axis:
         self.line_widths: dict[tuple[float, bool], float] = {}  # :func:`_spectral_width`'s
         self._spike_avar: np.ndarray | None = None
         self._halves: dict[bool, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
+        self._welch: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def welch(self, seg: int) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`effects.welch_psd` of the series in segments of ``seg`` (computed once: every
+        narrowband candidate of the axis reads the same spectrum at its resolution)."""
+        if seg not in self._welch:
+            self._welch[seg] = effects.welch_psd(self.sig.y, self.sig.tau0, seg)
+        return self._welch[seg]
 
     def spike_candidate(self) -> effects.Candidate | None:
         """:func:`effects.spike_candidate` of the full-rate series, searched once per axis (a
@@ -745,10 +753,10 @@ def _spectrum_view(ax: _Axis, state: _State, cand: effects.Candidate) -> dict:
         f = 0.196 / cand.params["tau_c_s"]
         return {"competing_line": _local_line(ax, state, f / 3, f * 3)}
     if cand.kind == "prefilter":
-        return {"rolloff": effects.psd_rolloff(ax.sig.y, ax.sig.tau0)}
+        return {"rolloff": effects.psd_rolloff(ax.sig.y, ax.sig.tau0, ax.welch)}
     if cand.kind == "narrowband":
         f, w = cand.evidence["shape"]
-        return {"band_excess": effects.band_excess(ax.sig.y, ax.sig.tau0, f, w)}
+        return {"band_excess": effects.band_excess(ax.sig.y, ax.sig.tau0, f, w, ax.welch)}
     return {}
 
 
@@ -873,7 +881,7 @@ def time_domain_fit(
     Σ e² / (m − 1 − 2 sinusoids).  ≈ 1 (χ²/dof) when the model describes the series at
     τ ≥ the coarse block; above 1 when the series holds what the model lacks.  It sees only the
     slow part (τ ≥ T/1024; a faster line as its block means' alias)."""
-    whiten = effects.Whitener(noise_psd(fit, shapes), len(y_d), dt, masked)
+    whiten = effects.whitener(noise_psd(fit, shapes), len(y_d), dt, masked)
     return _whitened_fit(whiten, shapes, y_d, dt)
 
 
@@ -989,7 +997,7 @@ def _whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis, kind: str) ->
         k2_hi = fit.profile_interval(state.avar, ax.edf, j, SLOW_K_LEVEL)[1]
         k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: fitted K
         psd = replace(psd, rrw=k2)
-    return effects.Whitener(psd, len(state.y_d), ax.dt, ax.masked_d)
+    return effects.whitener(psd, len(state.y_d), ax.dt, ax.masked_d)
 
 
 def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
@@ -1163,8 +1171,11 @@ def _spectrum_peak(ax: _Axis, state: _State, fit: ieee952.CompositeFit) -> float
     :func:`effects.hann_periodogram`) divided by the current model's rate PSD
     (:func:`noise_psd`: a smooth spectrum, so a line stands out of it wherever it lies) in the
     sinusoid search's band (:func:`_grids`, ×/÷ 1.6) below a fifth of the block rate (the
-    block means' spectrum; a full-rate FFT each round would cost more than the loop).  ``None``
-    when that band is empty."""
+    block means' spectrum; a full-rate FFT each round would cost more than the loop).  A model
+    with no noise there (N and K zero, above the flicker's cutoff) has no smooth spectrum to
+    divide by: the periodogram's own strongest ordinate is taken (a floor of :data:`effects.
+    NUGGET` × the model's largest value keeps the ratio finite where it is zero only in part).
+    ``None`` when that band is empty."""
     f_lo, f_top = _sinusoid_band(ax)
     f_hi = min(f_top, 0.2 / ax.dt)
     if f_hi <= f_lo:
@@ -1173,7 +1184,9 @@ def _spectrum_peak(ax: _Axis, state: _State, fit: ieee952.CompositeFit) -> float
     if f.size == 0:
         return None
     model = noise_psd(fit, state.effect_parameters).at(f)
-    return float(f[np.argmax(power / np.maximum(model, np.finfo(float).tiny))])
+    top = float(model.max())
+    floor = effects.NUGGET * top if top > 0 else 1.0
+    return float(f[np.argmax(power / np.maximum(model, floor))])
 
 
 def _time_judged(cand: effects.Candidate) -> bool:

@@ -6,6 +6,8 @@ The noise is the paper's gyro (``paper_gyro``, tests/model/conftest.py).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy import signal
@@ -108,6 +110,18 @@ def test_spectrum_views_read_the_data():
     tone = white + 0.3 * np.sin(2 * np.pi * 3.0 * t)
     assert effects.band_excess(tone, 0.01, 3.0, 0.01)["p_value"] < 1e-6
     assert effects.band_excess(white, 0.01, 3.0, 0.01)["p_value"] > 1e-3
+    # an axis computes each Welch spectrum once, whatever view asks for it
+    ax = loop._Axis(
+        AxisSignals("gyro_x", "gyro", tone, 0.01, None, None), allan_curves(tone[: 2**16], 0.01)[0]
+    )
+    asked: list[int] = []
+    spectra = ax.welch
+    ax.welch = lambda seg: asked.append(seg) or spectra(seg)
+    excess = effects.band_excess(tone, 0.01, 3.0, 0.01, ax.welch)
+    assert excess == effects.band_excess(tone, 0.01, 3.0, 0.01) and asked == [16384]  # ≈ 2/(w τ0)
+    assert spectra(16384) is spectra(16384)
+    assert effects.psd_rolloff(tone, 0.01, ax.welch) == effects.psd_rolloff(tone, 0.01)
+    assert asked == [16384, effects.ROLLOFF_SEGMENT]
 
 
 def test_spread_line_is_a_narrowband_vibration_with_its_width(base, paper_gyro):
@@ -330,6 +344,23 @@ def test_the_sinusoid_candidate_takes_the_spectrum_s_line_where_the_avar_s_has_n
     assert abs(loop._spectrum_peak(ax, state, current[0]) - 0.03) <= 2 / (N * TAU0)
     assert kept is strong and kept_fits is fits and test is None  # 0.35 Hz: above the GLS band
     assert kept.params["frequency_hz"] == pytest.approx(0.35, rel=1e-3)
+
+
+def test_the_spectrum_peak_of_a_model_with_no_noise_in_its_band(base, paper_gyro, monkeypatch):
+    """A model whose PSD is zero over the sinusoid band (N and K zero, above the flicker's
+    cutoff) gives the periodogram's own strongest ordinate, with no overflow: dividing by the
+    smallest float sent every ordinate of a series in large units to infinity, and the peak to
+    the band's first bin."""
+    _rng, y = base(33)
+    t = np.arange(N) * TAU0
+    loud = 1e9 * (y + 10 * paper_gyro.b * np.sin(2 * np.pi * 0.03 * t))  # periodogram ≫ 1
+    ax, state, current, *_ = _views(loud, 0.03)
+    silent = effects.NoisePsd(0.0, 0.0, 0.0, 0.0)
+    monkeypatch.setattr(loop, "noise_psd", lambda fit, shapes: silent)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        peak = loop._spectrum_peak(ax, state, current[0])
+    assert abs(peak - 0.03) <= 2 / (N * TAU0)
 
 
 def test_the_sinusoid_search_band_ends_where_the_fit_starts(base, paper_gyro):

@@ -130,3 +130,22 @@ def test_a_trace_of_fill_keeps_the_block_and_the_levinson_whitener():
     assert np.array_equal(kept.inv_chol, effects.Whitener(psd, N_D, DT).inv_chol)
     trace[1501] = 0.001  # a little more: the coarse block (500) is left out
     assert 500 not in effects.Whitener(psd, N_D, DT, trace).blocks
+
+
+def test_a_whitener_is_built_once_for_the_same_model_and_mask():
+    """The loop asks for the whitener of a round's model again a round later
+    (:func:`effects.whitener`): equal arguments give the one already built (an O(m³) Cholesky
+    with blocks left out), read-only; another mask, model or length gives its own."""
+    psd = effects.NoisePsd(N2, 0.0, np.inf, K2)
+    first = effects.whitener(psd, N_D, DT, _gapped())
+    assert effects.whitener(effects.NoisePsd(N2, 0.0, np.inf, K2), N_D, DT, _gapped()) is first
+    assert np.array_equal(first.inv_chol, effects.Whitener(psd, N_D, DT, _gapped()).inv_chol)
+    assert not (first.inv_chol.flags.writeable or first.drift.flags.writeable)
+    moved = _gapped()
+    moved[2500] = True
+    assert 833 not in effects.whitener(psd, N_D, DT, moved).blocks and 833 in first.blocks
+    assert len(effects.whitener(psd, N_D, DT).blocks) == 1000
+    louder = effects.whitener(effects.NoisePsd(4 * N2, 0.0, np.inf, K2), N_D, DT, _gapped())
+    assert louder.inv_chol[0, 0] == pytest.approx(first.inv_chol[0, 0] / 2, rel=0.05)
+    assert effects.whitener(psd, N_D - 3, DT, _gapped()[:-3]).factor == 3
+    assert len(effects.whitener(psd, N_D - 3, DT, _gapped()[:-3]).blocks) == len(first.blocks) - 1
