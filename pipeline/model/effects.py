@@ -23,7 +23,6 @@ Two families (issue 4):
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -266,34 +265,6 @@ def _inverse_cholesky(cov: np.ndarray) -> np.ndarray:
     if info != 0:  # a zero pivot: potrf would have refused the matrix first
         raise linalg.LinAlgError(f"triangular inverse failed (LAPACK dtrtri info {info})")
     return inv
-
-
-WHITENERS_KEPT = 4
-"""Whiteners :func:`whitener` keeps (the loop builds the same one again a round later: the
-model a candidate's errors were scored with becomes the next round's model; ~12 % of the
-constructions on the real recordings, each an O(m³) Cholesky when blocks are left out, ~8 MB
-each)."""
-
-
-def whitener(psd: NoisePsd, n: int, dt: float, masked: np.ndarray | None = None) -> Whitener:
-    """The :class:`Whitener` of these arguments, reused when one of the last
-    :data:`WHITENERS_KEPT` had them all (equal PSD, length, block and mask); its arrays are
-    read-only."""
-    if masked is None:
-        return _kept_whitener(psd, n, dt, None)
-    masked = np.ascontiguousarray(masked)
-    return _kept_whitener(psd, n, dt, (masked.dtype.str, masked.shape, masked.tobytes()))
-
-
-@functools.lru_cache(maxsize=WHITENERS_KEPT)
-def _kept_whitener(
-    psd: NoisePsd, n: int, dt: float, masked: tuple[str, tuple[int, ...], bytes] | None
-) -> Whitener:
-    mask = None if masked is None else np.frombuffer(masked[2], masked[0]).reshape(masked[1])
-    made = Whitener(psd, n, dt, mask)
-    for array in (made.inv_chol, made.drift, made.blocks):
-        array.flags.writeable = False
-    return made
 
 
 MAX_FILLED_FRACTION = 0.01

@@ -67,6 +67,7 @@ ALPHA = 1e-3  # family-wise level of each time-domain candidate (Bonferroni over
 N_SEGMENTS = 16  # interleaved hold-out segments for time-domain corrections
 MAX_ROUNDS = 6
 SLOW_K_LEVEL = 0.68  # K of the slow effects' whitener: upper end of this profile interval
+WHITENERS_KEPT = 4  # per axis (:meth:`_Axis.whitener`; each ≤ 1024² floats, 8 MB)
 N_BOOT = 200
 AVAR_ONLY = frozenset({"sinusoid", "narrowband", "prefilter"})
 """AVAR terms whose acceptance the time-domain error does not judge (reported only).  The
@@ -188,7 +189,7 @@ class LoopResult:
     rejected: list[RejectedCandidate] = field(default_factory=list)
     time_error_before: float = float("nan")
     time_error_after: float = float("nan")
-    """:func:`time_domain_error` of the baseline on the series and of the final model on the
+    """:func:`time_domain_fit`'s error of the baseline on the series and of the final model on the
     corrected series."""
 
     def up_to(self, n_tau: int) -> LoopResult:
@@ -424,6 +425,27 @@ class _Axis:
         self._spike_avar: np.ndarray | None = None
         self._halves: dict[bool, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
         self._welch: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._whiteners: dict[effects.NoisePsd, effects.Whitener] = {}
+
+    def whitener(self, psd: effects.NoisePsd) -> effects.Whitener:
+        """The GLS :class:`effects.Whitener` of the block means under ``psd`` (their blocks
+        of :attr:`masked_d` left out), read-only; the last :data:`WHITENERS_KEPT` are kept:
+        the model a round's candidate was scored with is the next round's model, and a masked
+        whitener costs an O(m³) Cholesky (~12 % of them were built twice on the real
+        recordings)."""
+        if psd not in self._whiteners:
+            if len(self._whiteners) >= WHITENERS_KEPT:
+                del self._whiteners[next(iter(self._whiteners))]  # the oldest
+            made = effects.Whitener(psd, len(self.y_d), self.dt, self.masked_d)
+            for array in (made.inv_chol, made.drift, made.blocks):
+                array.flags.writeable = False
+            self._whiteners[psd] = made
+        return self._whiteners[psd]
+
+    def time_fit(self, fit: ieee952.CompositeFit, shapes: Shapes, y_d: np.ndarray) -> TimeFit:
+        """:func:`time_domain_fit` of ``y_d`` (this axis' block means, maybe corrected) with
+        the axis' kept whitener of the model."""
+        return _whitened_fit(self.whitener(noise_psd(fit, shapes)), shapes, y_d, self.dt)
 
     def welch(self, seg: int) -> tuple[np.ndarray, np.ndarray]:
         """:func:`effects.welch_psd` of the series in segments of ``seg`` (computed once: every
@@ -807,7 +829,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         accepted.append(chosen.accepted(good.error, new_good.error))
         fit, good = new_fit, new_good
     terms1 = terms0 if fit is fit0 else state.terms(ax)
-    time_before = time_domain_error(fit0, {}, ax.y_d, ax.dt, ax.masked_d)
+    time_before = ax.time_fit(fit0, {}, ax.y_d).error
     return LoopResult(
         name=signals.name,
         tau_s=tau,
@@ -825,24 +847,13 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         time_error_after=(
             time_before
             if fit is fit0
-            else time_domain_error(fit, state.effect_parameters, state.y_d, ax.dt, ax.masked_d)
+            else ax.time_fit(fit, state.effect_parameters, state.y_d).error
         ),
     )
 
 
 Shapes = dict[str, tuple[str, tuple]]
 """Each extra AVAR column's (kind, shape parameters) (``_State.effect_parameters``)."""
-
-
-def time_domain_error(
-    fit: ieee952.CompositeFit,
-    shapes: Shapes,
-    y_d: np.ndarray,
-    dt: float,
-    masked: np.ndarray | None = None,
-) -> float:
-    """:func:`time_domain_fit`'s error alone."""
-    return time_domain_fit(fit, shapes, y_d, dt, masked)[0]
 
 
 class TimeFit(NamedTuple):
@@ -881,7 +892,7 @@ def time_domain_fit(
     Σ e² / (m − 1 − 2 sinusoids).  ≈ 1 (χ²/dof) when the model describes the series at
     τ ≥ the coarse block; above 1 when the series holds what the model lacks.  It sees only the
     slow part (τ ≥ T/1024; a faster line as its block means' alias)."""
-    whiten = effects.whitener(noise_psd(fit, shapes), len(y_d), dt, masked)
+    whiten = effects.Whitener(noise_psd(fit, shapes), len(y_d), dt, masked)
     return _whitened_fit(whiten, shapes, y_d, dt)
 
 
@@ -997,7 +1008,7 @@ def _whitener(fit: ieee952.CompositeFit, state: _State, ax: _Axis, kind: str) ->
         k2_hi = fit.profile_interval(state.avar, ax.edf, j, SLOW_K_LEVEL)[1]
         k2 = max(psd.rrw, k2_hi) if np.isfinite(k2_hi) else psd.rrw  # unbounded: fitted K
         psd = replace(psd, rrw=k2)
-    return effects.whitener(psd, len(state.y_d), ax.dt, ax.masked_d)
+    return ax.whitener(psd)
 
 
 def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
@@ -1008,14 +1019,13 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
     had soaked part of the effect into K and R: a joint fit of noise model and effect).
     """
     tau, edf, dt = ax.tau, ax.edf, ax.dt
-    masked = ax.masked_d
     whiten = _whitener(fit, state, ax, "")
     time_old = _whitened_fit(whiten, state.effect_parameters, state.y_d, dt)
 
     def errors(
         fit_new: ieee952.CompositeFit, new_state: _State, cand: effects.Candidate
     ) -> ErrorChange:
-        time_new = time_domain_fit(fit_new, new_state.effect_parameters, new_state.y_d, dt, masked)
+        time_new = ax.time_fit(fit_new, new_state.effect_parameters, new_state.y_d)
         return ErrorChange.between(
             fit,
             fit_new,

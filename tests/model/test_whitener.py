@@ -17,7 +17,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imupipe.model import effects
+from imupipe.model import effects, loop
+from imupipe.model.loop import AxisSignals
+from imupipe.stats.allan import allan_curves
 
 N2, K2 = 1e-6, 1e-9  # white (rad/s)²/Hz, rate random walk (rad/s)²/s
 N_D, DT = 3000, 0.5  # block means of 0.5 s: 1000 coarse blocks of 1.5 s
@@ -132,20 +134,28 @@ def test_a_trace_of_fill_keeps_the_block_and_the_levinson_whitener():
     assert 500 not in effects.Whitener(psd, N_D, DT, trace).blocks
 
 
-def test_a_whitener_is_built_once_for_the_same_model_and_mask():
+def test_an_axis_builds_the_whitener_of_a_model_once():
     """The loop asks for the whitener of a round's model again a round later
-    (:func:`effects.whitener`): equal arguments give the one already built (an O(m³) Cholesky
-    with blocks left out), read-only; another mask, model or length gives its own."""
+    (:meth:`loop._Axis.whitener`): an equal PSD gives the one already built (with blocks left
+    out, an O(m³) Cholesky), read-only and equal to a fresh one; another PSD its own; the
+    oldest is dropped beyond :data:`loop.WHITENERS_KEPT`.  The axis' time-domain fit is
+    :func:`loop.time_domain_fit`'s."""
+    y = 1e-3 * np.random.default_rng(3).standard_normal(60_000)
+    excluded = np.zeros(y.size, bool)
+    excluded[20_000:26_000] = True
+    signals = AxisSignals("gyro_x", "gyro", y, 0.01, None, None, excluded=excluded)
+    ax = loop._Axis(signals, allan_curves(y, 0.01)[0])
     psd = effects.NoisePsd(N2, 0.0, np.inf, K2)
-    first = effects.whitener(psd, N_D, DT, _gapped())
-    assert effects.whitener(effects.NoisePsd(N2, 0.0, np.inf, K2), N_D, DT, _gapped()) is first
-    assert np.array_equal(first.inv_chol, effects.Whitener(psd, N_D, DT, _gapped()).inv_chol)
+    first = ax.whitener(psd)
+    assert ax.whitener(effects.NoisePsd(N2, 0.0, np.inf, K2)) is first
+    fresh = effects.Whitener(psd, len(ax.y_d), ax.dt, ax.masked_d)
+    assert np.array_equal(first.inv_chol, fresh.inv_chol) and len(first.blocks) < len(ax.y_d)
+    assert np.array_equal(first.blocks, fresh.blocks)
     assert not (first.inv_chol.flags.writeable or first.drift.flags.writeable)
-    moved = _gapped()
-    moved[2500] = True
-    assert 833 not in effects.whitener(psd, N_D, DT, moved).blocks and 833 in first.blocks
-    assert len(effects.whitener(psd, N_D, DT).blocks) == 1000
-    louder = effects.whitener(effects.NoisePsd(4 * N2, 0.0, np.inf, K2), N_D, DT, _gapped())
-    assert louder.inv_chol[0, 0] == pytest.approx(first.inv_chol[0, 0] / 2, rel=0.05)
-    assert effects.whitener(psd, N_D - 3, DT, _gapped()[:-3]).factor == 3
-    assert len(effects.whitener(psd, N_D - 3, DT, _gapped()[:-3]).blocks) == len(first.blocks) - 1
+    louder = [ax.whitener(effects.NoisePsd(k * N2, 0.0, np.inf, K2)) for k in range(2, 6)]
+    assert louder[0] is not first and len({id(w) for w in louder}) == loop.WHITENERS_KEPT
+    assert ax.whitener(psd) is not first  # dropped: the oldest of five
+    assert ax.whitener(effects.NoisePsd(5 * N2, 0.0, np.inf, K2)) is louder[-1]
+    state = loop._State(ax.avar, ax.y_d.copy(), None)
+    fit = state.fit(ax)
+    assert ax.time_fit(fit, {}, ax.y_d) == loop.time_domain_fit(fit, {}, ax.y_d, ax.dt, ax.masked_d)
