@@ -38,8 +38,8 @@ from imupipe.report.outputs import ReportOutputs
 
 WORKER_MEMORY_SHARE = 0.6
 """Fraction of a Dask worker's memory limit one analysis may plan for: above it the recording
-takes ``imupipe analyze``'s pass-by-pass path (one axis per pass, same results) instead of the
-nanny restarting the worker at 95 %."""
+takes ``imupipe analyze``'s low-memory path (decoded once into a temporary on-disk store, one
+axis in memory at a time, same results) instead of the nanny restarting the worker at 95 %."""
 
 STAGING = ".staging"
 
