@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 import pytest
-from scipy import signal
+from scipy import signal, special
 
 from imupipe.model import effects, loop
 from imupipe.model.loop import AxisSignals, close_loop
@@ -96,6 +96,37 @@ def test_both_views_decide_the_label():
     assert "no roll-off towards Nyquist" in _decision("prefilter", {"rolloff": white}).reason
     lowpass = {"high_to_mid": 0.55, "p_value": 1e-40, "band_hz": [40.0, 50.0]}
     assert _decision("prefilter", {"rolloff": lowpass}).accept
+
+
+def test_a_welch_band_mean_has_the_hann_windows_variance():
+    """The Hann window correlates a segment's adjacent DFT bins (power correlation 4/9, then
+    1/36) and 50 %-overlapping segments (1/36): the mean of b ordinates of K segments has
+    relative variance (1 + 2(1 − 1/b)·4/9 + 2(1 − 2/b)/36)·(1 + 2(1 − 1/K)/36) / (K b), about
+    twice the 1/(K b) of independent ordinates (Percival & Walden 1993, §6.6, §6.17)."""
+    for seg, segments, bins in [(256, 255, 39), (256, 255, 26), (4096, 31, 7), (64, 3, 2)]:
+        within = 1 + 2 * (1 - 1 / bins) * 4 / 9 + (2 * (1 - 2 / bins) / 36 if bins > 2 else 0)
+        across = 1 + 2 * (1 - 1 / segments) / 36
+        expected = within * across / (segments * bins)
+        assert effects.welch_band_variance(seg, segments, bins) == pytest.approx(expected, 1e-12)
+    assert effects.welch_band_variance(256, 1, 1) == pytest.approx(1.0)  # one ordinate: χ²₂
+
+
+@pytest.mark.parametrize("view", ["rolloff", "band_excess"])
+def test_the_spectrum_views_p_values_are_calibrated_on_white_noise(view):
+    """On white noise the band ratio's z (ln ratio / its standard error) has unit spread, so
+    p < 0.05 on 5 % of series: with 1/(K b), the correlated ordinates' variance ignored, the
+    spread was 1.47 and p < 1e-3 came ~15x too often.  500 series: the spread within 1 ± 0.1
+    (its standard error is ~3 %)."""
+    z = []
+    for seed in range(500):
+        y = np.random.default_rng(seed).standard_normal(2**14 if view == "rolloff" else 2**16)
+        if view == "rolloff":
+            p = effects.psd_rolloff(y, 0.01)["p_value"]
+        else:
+            p = effects.band_excess(y, 0.01, 3.0, 0.05)["p_value"]
+        z.append(-special.ndtri(p))
+    assert 0.9 < np.std(z) < 1.1
+    assert abs(np.mean(z)) < 0.12
 
 
 def test_spectrum_views_read_the_data():
@@ -357,6 +388,14 @@ def test_the_spectrum_peak_of_a_model_with_no_noise_in_its_band(base, paper_gyro
     ax, state, current, *_ = _views(loud, 0.03)
     silent = effects.NoisePsd(0.0, 0.0, 0.0, 0.0)
     monkeypatch.setattr(loop, "noise_psd", lambda fit, shapes: silent)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        peak = loop._spectrum_peak(ax, state, current[0])
+    assert abs(peak - 0.03) <= 2 / (N * TAU0)
+    # zero only above a flicker cut-off at 0.02 Hz: the floor (NUGGET × the model's largest
+    # value) keeps every ratio finite, and the line above the cut-off is the peak
+    below = effects.NoisePsd(0.0, 1.0, 0.02, 0.0)
+    monkeypatch.setattr(loop, "noise_psd", lambda fit, shapes: below)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         peak = loop._spectrum_peak(ax, state, current[0])
