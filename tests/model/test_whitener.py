@@ -159,3 +159,27 @@ def test_an_axis_builds_the_whitener_of_a_model_once():
     state = loop._State(ax.avar, ax.y_d.copy(), None)
     fit = state.fit(ax)
     assert ax.time_fit(fit, {}, ax.y_d) == loop.time_domain_fit(fit, {}, ax.y_d, ax.dt, ax.masked_d)
+
+
+def test_an_axis_keeps_a_spectrum_while_its_series_is_the_same_object():
+    """:meth:`loop._Axis.spectral` computes once per key while the series (and its correction)
+    are the very same objects: an equal copy, or another correction, computes again; the oldest
+    of more than :data:`loop.SPECTRA_KEPT` keys is dropped."""
+    y = np.random.default_rng(4).standard_normal(60_000)
+    ax = loop._Axis(AxisSignals("gyro_x", "gyro", y, 0.01, None, None), allan_curves(y, 0.01)[0])
+    calls: list[str] = []
+
+    def compute(tag: str):
+        return lambda: calls.append(tag) or {"tag": tag}
+
+    first = ax.spectral(("line", 0.5), (y, None), compute("a"))
+    assert ax.spectral(("line", 0.5), (y, None), compute("b")) is first and calls == ["a"]
+    assert ax.spectral(("line", 0.5), (y.copy(), None), compute("c"))["tag"] == "c"
+    fix = object()
+    assert ax.spectral(("line", 0.5), (y, fix), compute("d"))["tag"] == "d"
+    assert ax.spectral(("line", 0.5), (y, fix), compute("e"))["tag"] == "d"
+    for k in range(loop.SPECTRA_KEPT):
+        ax.spectral(("other", k), (y, None), compute(f"o{k}"))
+    assert ax.spectral(("line", 0.5), (y, fix), compute("f"))["tag"] == "f"  # dropped
+    assert ax.spectral(("other", 1), (y, None), compute("g"))["tag"] == "o1"
+    assert calls == ["a", "c", "d", *(f"o{k}" for k in range(loop.SPECTRA_KEPT)), "f"]
