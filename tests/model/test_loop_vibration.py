@@ -115,7 +115,7 @@ def test_a_welch_band_mean_has_the_hann_windows_variance():
 def test_the_spectrum_views_p_values_are_calibrated_on_white_noise(view):
     """On white noise the band ratio's z (ln ratio / its standard error) has unit spread, so
     p < 0.05 on 5 % of series: with 1/(K b), the correlated ordinates' variance ignored, the
-    spread was 1.47 and p < 1e-3 came ~15x too often.  500 series: the spread within 1 ± 0.1
+    spread was 1.47 and p < 1e-3 came ~17x too often.  500 series: the spread within 1 ± 0.1
     (its standard error is ~3 %)."""
     z = []
     for seed in range(500):
