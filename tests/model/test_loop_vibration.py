@@ -377,6 +377,22 @@ def test_the_sinusoid_candidate_takes_the_spectrum_s_line_where_the_avar_s_has_n
     assert kept.params["frequency_hz"] == pytest.approx(0.35, rel=1e-3)
 
 
+def test_the_spectrum_peak_is_read_over_the_models_psd(base, paper_gyro):
+    """Beside a strong rate random walk the raw periodogram's largest ordinate is the band's
+    lowest; divided by the fitted model's PSD (which holds that K) a 3 B tone at 0.05 Hz is the
+    peak."""
+    rng, y = base(35)
+    t = np.arange(N) * TAU0
+    walk = np.cumsum(rng.standard_normal(N)) * paper_gyro.b * np.sqrt(TAU0)
+    tone = 3 * paper_gyro.b * np.sin(2 * np.pi * 0.05 * t)
+    ax, state, current, *_ = _views(y + walk + tone, 0.05)
+    lo, hi = loop._sinusoid_band(ax)
+    f, power = effects.hann_periodogram(state.y_d, ax.dt, lo, min(hi, 0.2 / ax.dt))
+    assert f[np.argmax(power)] < 0.001
+    assert current[0].coef[current[0].names.index("rate_random_walk")] > 0
+    assert abs(loop._spectrum_peak(ax, state, current[0]) - 0.05) <= 2 / (N * TAU0)
+
+
 def test_the_spectrum_peak_of_a_model_with_no_noise_in_its_band(base, paper_gyro, monkeypatch):
     """A model whose PSD is zero over the sinusoid band (N and K zero, above the flicker's
     cutoff) gives the periodogram's own strongest ordinate, with no overflow: dividing by the
