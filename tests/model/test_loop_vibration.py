@@ -403,19 +403,15 @@ def test_the_spectrum_peak_of_a_model_with_no_noise_in_its_band(base, paper_gyro
     loud = 1e9 * (y + 10 * paper_gyro.b * np.sin(2 * np.pi * 0.03 * t))  # periodogram ≫ 1
     ax, state, current, *_ = _views(loud, 0.03)
     silent = effects.NoisePsd(0.0, 0.0, 0.0, 0.0)
-    monkeypatch.setattr(loop, "noise_psd", lambda fit, shapes: silent)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        peak = loop._spectrum_peak(ax, state, current[0])
-    assert abs(peak - 0.03) <= 2 / (N * TAU0)
-    # zero only above a flicker cut-off at 0.02 Hz: the floor (NUGGET × the model's largest
-    # value) keeps every ratio finite, and the line above the cut-off is the peak
+    # and zero only above a flicker cut-off at 0.02 Hz: the floor (NUGGET × the model's
+    # largest value) keeps every ratio finite, and the line above the cut-off is the peak
     below = effects.NoisePsd(0.0, 1.0, 0.02, 0.0)
-    monkeypatch.setattr(loop, "noise_psd", lambda fit, shapes: below)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        peak = loop._spectrum_peak(ax, state, current[0])
-    assert abs(peak - 0.03) <= 2 / (N * TAU0)
+    for psd in (silent, below):
+        monkeypatch.setattr(loop, "noise_psd", lambda fit, shapes, psd=psd: psd)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            peak = loop._spectrum_peak(ax, state, current[0])
+        assert abs(peak - 0.03) <= 2 / (N * TAU0)
 
 
 def test_the_sinusoid_search_band_ends_where_the_fit_starts(base, paper_gyro):
