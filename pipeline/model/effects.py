@@ -911,7 +911,9 @@ def welch_band_variance(seg: int, segments: int, bins: int) -> float:
     (Percival & Walden 1993, Spectral Analysis for Physical Applications, §6.6 and §6.17;
     Welch 1967).  For the Hann window ρ²₁ = 4/9, ρ²₂ = 1/36 and c²₁ = 1/36: ~2/(K b), twice
     the variance of independent ordinates (measured on white noise: the z of a band ratio had
-    standard deviation 1.47 ± 0.03 with 1/(K b), 1.42 predicted)."""
+    standard deviation 1.47 ± 0.03 with 1/(K b), 1.42 predicted).  No ordinate: infinite."""
+    if bins < 1:
+        return float("inf")
     from scipy import signal  # ~0.5 s to import; most analyses never need a Welch PSD
 
     w = signal.get_window("hann", seg)  # scipy.signal.welch's window and hop

@@ -109,6 +109,7 @@ def test_a_welch_band_mean_has_the_hann_windows_variance():
         expected = within * across / (segments * bins)
         assert effects.welch_band_variance(seg, segments, bins) == pytest.approx(expected, 1e-12)
     assert effects.welch_band_variance(256, 1, 1) == pytest.approx(1.0)  # one ordinate: χ²₂
+    assert effects.welch_band_variance(256, 1, 0) == np.inf  # an empty band says nothing
 
 
 @pytest.mark.parametrize("view", ["rolloff", "band_excess"])
