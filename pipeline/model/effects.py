@@ -928,6 +928,19 @@ def welch_band_variance(seg: int, segments: int, bins: int) -> float:
     return within * across / (segments * bins)
 
 
+def _band_ratio(
+    pxx: np.ndarray, over: np.ndarray, under: np.ndarray, seg: int, n: int
+) -> tuple[float, float]:
+    """The ratio of the mean Welch PSD ``pxx`` in band ``over`` to that in band ``under``
+    (masks of its ordinates; segments of ``seg`` of ``n`` samples, 50 % overlap) and the
+    standard error of its logarithm, √(V_over + V_under) (:func:`welch_band_variance`)."""
+    segments = max(1, 2 * n // seg - 1)
+    ratio = float(pxx[over].mean() / pxx[under].mean())
+    variance = welch_band_variance(seg, segments, int(over.sum()))
+    variance += welch_band_variance(seg, segments, int(under.sum()))
+    return ratio, float(np.sqrt(variance))
+
+
 def psd_rolloff(y: np.ndarray, tau0: float, welch: Welch | None = None) -> dict[str, float]:
     """The spectrum's view of a prefilter: the mean Welch PSD (Hann, :data:`ROLLOFF_SEGMENT`
     samples, 50 % overlap; Welch 1967) of the near-Nyquist band over that of the mid band
@@ -946,14 +959,7 @@ def psd_rolloff(y: np.ndarray, tau0: float, welch: Welch | None = None) -> dict[
     (m_lo, m_hi), (h_lo, h_hi) = ROLLOFF_BANDS
     mid = (f >= m_lo * fs) & (f <= m_hi * fs)
     high = (f >= h_lo * fs) & (f < h_hi * fs)
-    segments = max(1, 2 * n // seg - 1)
-    ratio = float(pxx[high].mean() / pxx[mid].mean())
-    se = float(
-        np.sqrt(
-            welch_band_variance(seg, segments, int(mid.sum()))
-            + welch_band_variance(seg, segments, int(high.sum()))
-        )
-    )
+    ratio, se = _band_ratio(pxx, high, mid, seg, n)
     return {
         "high_to_mid": ratio,
         "p_value": float(special.ndtr(np.log(ratio) / se)),
@@ -988,14 +994,7 @@ def band_excess(
     line, shoulder = dist <= w, (dist >= 2 * w) & (dist <= 4 * w) & (f > 0)
     if not line.any() or not shoulder.any():
         return {}
-    segments = max(1, 2 * n // seg - 1)
-    ratio = float(pxx[line].mean() / pxx[shoulder].mean())
-    se = float(
-        np.sqrt(
-            welch_band_variance(seg, segments, int(line.sum()))
-            + welch_band_variance(seg, segments, int(shoulder.sum()))
-        )
-    )
+    ratio, se = _band_ratio(pxx, line, shoulder, seg, n)
     return {
         "line_to_shoulders": ratio,
         "p_value": float(special.ndtr(-np.log(ratio) / se)),

@@ -50,7 +50,7 @@ curves) touch the full series, and only when those candidates are already signif
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Literal, NamedTuple, TypeVar
@@ -71,6 +71,7 @@ MAX_ROUNDS = 6
 SLOW_K_LEVEL = 0.68  # K of the slow effects' whitener: upper end of this profile interval
 WHITENERS_KEPT = 4  # per axis (:meth:`_Axis.whitener`; each ≤ 1024² floats, 8 MB)
 SPECTRA_KEPT = 32  # per axis (:meth:`_Axis.spectral`: spread-line fits, periodogram lines)
+WELCH_KEPT = 8  # per axis (:meth:`_Axis.welch`: Welch spectra by segment length)
 N_BOOT = 200
 AVAR_ONLY = frozenset({"sinusoid", "narrowband", "prefilter"})
 """AVAR terms whose acceptance the time-domain error does not judge (reported only).  The
@@ -388,6 +389,27 @@ def goodness(
     )
 
 
+class _Kept:
+    """The last ``size`` results of computations by key, each valid while the inputs it was
+    computed from are the very same objects (compared by identity: a corrected series is a new
+    array, and is computed again); the oldest is dropped first."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self._held: dict[Hashable, tuple[tuple, object]] = {}
+
+    def get(self, key: Hashable, inputs: tuple, compute: Callable[[], T]) -> T:
+        hit = self._held.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], inputs, strict=True)):
+            return hit[1]  # type: ignore[return-value]
+        value = compute()
+        self._held.pop(key, None)
+        if len(self._held) >= self.size:
+            del self._held[next(iter(self._held))]  # the oldest
+        self._held[key] = (inputs, value)
+        return value
+
+
 class _Axis:
     """Per-axis context: the τ grid, decimation and the evaluation of candidates."""
 
@@ -427,9 +449,9 @@ class _Axis:
         self.line_widths: dict[tuple[float, bool], float] = {}  # :func:`_spectral_width`'s
         self._spike_avar: np.ndarray | None = None
         self._halves: dict[bool, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
-        self._welch: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self._whiteners: dict[effects.NoisePsd, effects.Whitener] = {}
-        self._spectral: dict[tuple, tuple[tuple, object]] = {}
+        self._welch = _Kept(WELCH_KEPT)
+        self._whiteners = _Kept(WHITENERS_KEPT)
+        self._spectral = _Kept(SPECTRA_KEPT)
 
     def spectral(self, key: tuple, inputs: tuple, compute: Callable[[], T]) -> T:
         """``compute()`` once per ``key`` while ``inputs`` are the very same objects (the series
@@ -437,15 +459,7 @@ class _Axis:
         changed neither asks for the same spread-line fit or periodogram line again (measured:
         12 of 51 spread-line fits on a real ADIS16405 recording, 0.3 s each).  The last
         :data:`SPECTRA_KEPT` results are kept."""
-        hit = self._spectral.get(key)
-        if hit is not None and all(a is b for a, b in zip(hit[0], inputs, strict=True)):
-            return hit[1]  # type: ignore[return-value]
-        value = compute()
-        self._spectral.pop(key, None)
-        if len(self._spectral) >= SPECTRA_KEPT:
-            del self._spectral[next(iter(self._spectral))]  # the oldest
-        self._spectral[key] = (inputs, value)
-        return value
+        return self._spectral.get(key, inputs, compute)
 
     def whitener(self, psd: effects.NoisePsd) -> effects.Whitener:
         """The GLS :class:`effects.Whitener` of the block means under ``psd`` (their blocks
@@ -453,14 +467,14 @@ class _Axis:
         the model a round's candidate was scored with is the next round's model, and a masked
         whitener costs an O(m³) Cholesky (~12 % of them were built twice on the real
         recordings)."""
-        if psd not in self._whiteners:
-            if len(self._whiteners) >= WHITENERS_KEPT:
-                del self._whiteners[next(iter(self._whiteners))]  # the oldest
+
+        def build() -> effects.Whitener:
             made = effects.Whitener(psd, len(self.y_d), self.dt, self.masked_d)
             for array in (made.inv_chol, made.drift, made.blocks):
                 array.flags.writeable = False
-            self._whiteners[psd] = made
-        return self._whiteners[psd]
+            return made
+
+        return self._whiteners.get(psd, (), build)
 
     def time_fit(self, fit: ieee952.CompositeFit, shapes: Shapes, y_d: np.ndarray) -> TimeFit:
         """:func:`time_domain_fit` of ``y_d`` (this axis' block means, maybe corrected) with
@@ -470,9 +484,7 @@ class _Axis:
     def welch(self, seg: int) -> tuple[np.ndarray, np.ndarray]:
         """:func:`effects.welch_psd` of the series in segments of ``seg`` (computed once: every
         narrowband candidate of the axis reads the same spectrum at its resolution)."""
-        if seg not in self._welch:
-            self._welch[seg] = effects.welch_psd(self.sig.y, self.sig.tau0, seg)
-        return self._welch[seg]
+        return self._welch.get(seg, (), lambda: effects.welch_psd(self.sig.y, self.sig.tau0, seg))
 
     def spike_candidate(self) -> effects.Candidate | None:
         """:func:`effects.spike_candidate` of the full-rate series, searched once per axis (a
