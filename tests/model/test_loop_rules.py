@@ -127,6 +127,19 @@ def test_sinusoid_under_both_thresholds_is_rejected_with_its_delta_bic_and_tone_
     assert runs == []
 
 
+@pytest.mark.parametrize(("k_bound_p", "accept"), [(0.000999, True), (0.001, False)])
+def test_coupling_under_k_bound_is_a_gate_at_alpha(k_bound_p, accept):
+    """A coupling significant under the fitted PSD carries its p-value under K's bound when the
+    Allan view does not support it: that p must be below α too."""
+    trial, runs = _trial(column=False, line_p=None)
+    trial.cand.evidence["p_value_family_k_bound"] = k_bound_p
+    d = _decide(trial)
+    assert d.accept is accept
+    reason = f"p {k_bound_p:.3g} >= 0.001 with K at its 0.68 upper bound, and the Allan error"
+    assert (d.reason or "").startswith(reason) is not accept
+    assert runs == [1]
+
+
 def test_time_domain_candidate_not_significant_is_rejected_with_its_family_p():
     trial, runs = _trial(column=False, margin=2 * np.log(1e-3 / 1.234e-3), p_value=1.234e-3)
     d = _decide(trial)
@@ -721,7 +734,7 @@ def test_sinusoid_in_one_half_only_does_not_hold_out_of_sample(run_axis):
 
 
 def test_temperature_coupling_past_bonferroni_is_accepted(run_axis):
-    res = run_axis("temperature", 4e-4)
+    res = run_axis("temperature", 5e-4)
     assert [e.kind for e in res.accepted] == ["temperature"]
     ev = res.accepted[0].evidence
     assert ev["n_time_domain_tests"] == 4  # temperature, step, warm-up, ramp (no supply)
@@ -730,6 +743,23 @@ def test_temperature_coupling_past_bonferroni_is_accepted(run_axis):
     # a slow correction: its fall shows in the time domain, not in Allan space
     assert ev["time_domain_deviance_fall"] >= CHI2_95 > ev["allan_error_fall_chi2"]
     assert ev["time_domain_error_judged"] is True
+    # so it is tested under K's bound too, and passes (p 4.4e-6)
+    assert ev["p_value_family_k_bound"] < 1e-3
+
+
+def test_temperature_coupling_significant_only_under_the_fitted_psd_is_rejected(run_axis):
+    """Coupling 4e-4 rad/s/°C (accepted before session 19): family p 2.2e-4 under the fitted
+    PSD, but its Allan error rises and under K at its 68 % bound p is 1.3e-3 ≥ α: a random
+    walk the Allan curve allows could have made it (``loop.COUPLING_KINDS``)."""
+    rec = _candidate(run_axis("temperature", 4e-4), "temperature")
+    ev = rec.evidence
+    assert ev["p_value_family"] < 1e-3 <= ev["p_value_family_k_bound"], "re-tune coupling"
+    assert ev["allan_error_fall_chi2"] < CHI2_95
+    assert rec.reason == (
+        f"p {ev['p_value_family_k_bound']:.3g} >= 0.001 with K at its 0.68 upper bound, and the "
+        "Allan error does not fall: a slow wander of the noise can explain it"
+    )
+    assert ev["holdout"]["holds"] is True  # that gate alone rejects it
 
 
 def test_temperature_coupling_significant_only_before_the_family_factor_is_rejected(run_axis):
