@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 
 from imupipe.fleet.curves import UNIT_COLUMN
 from imupipe.fleet.population import TermStats, final_terms
-from imupipe.report.figures import sparse_log_ticks
+from imupipe.report.figures import log_labels, sparse_log_ticks
 from imupipe.units import PAPER_UNIT, from_si
 from imupipe.vocab import AXES_OF, SENSOR_TITLES
 
@@ -134,6 +134,7 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
             ax.plot(x, v, "v", color="0.5", ms=4, ls="none")
         ax.set_xticks(range(len(axes)), axes)
         ax.set_yscale("log")  # spans about a decade: matplotlib's minor ticks label it
+        log_labels(ax.yaxis)
         ax.set_title(f"{symbol} [{unit}]")
         ax.grid(True, axis="y", which="major", lw=0.4, alpha=0.6)
     shown = [by_key[(a, t)] for a in axes for t, _ in STRIP_TERMS if (a, t) in by_key]

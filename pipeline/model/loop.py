@@ -101,8 +101,9 @@ family p 2.1e-11 → 0.0099; 700074 accel_y 9.3e-4 → 0.26; 9900029 accel_x 6.9
 fourth (700011 gyro_y, 8.9e-6 under the bound) is not: its correction lowers K's bound, as a
 real coupling's does.  Choices measured and not kept: the bound of the current model (before
 the correction) lost 10 of the 13 true couplings found on panels 41 and 43, sizes 10
-included, because a real coupling raises the uncorrected curve's K bound; the whole trial (estimate, hold-out) under
-the bound failed the hold-out of a true size-3 coupling (4100010: power ratios 1.007, 0.945)."""
+included, because a real coupling raises the uncorrected curve's K bound; the whole trial
+(estimate, hold-out) under the bound failed the hold-out of a true size-3 coupling (4100010:
+power ratios 1.007, 0.945)."""
 RAMP_KINDS = frozenset({"ramp"})
 """Corrections neither error can show: a linear rate ramp is the time-domain error's nuisance
 (projected out) and the Allan model's R term (measured: a 1.1e-7 rad/s² ramp on 1.4 h, GLS

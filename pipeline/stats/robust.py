@@ -14,7 +14,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from imupipe.jit import kernel_input
+from imupipe.jit import kernel_input, spread
 
 SELECT_BINS = 1 << 16
 """Histogram bins of each selection pass."""
@@ -178,8 +178,11 @@ def abs_quantile(x: np.ndarray, p: float) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
-def _running_median(x: np.ndarray, half: int, gap: int) -> np.ndarray:  # pragma: no cover (JIT)
-    """Columns of :func:`running_median`: a sorted window of the rows at offsets
+def _running_median(
+    x: np.ndarray, half: int, gap: int, out: np.ndarray, start: int, step: int
+) -> None:  # pragma: no cover (JIT)
+    """Columns ``start, start + step, …`` of :func:`running_median` into ``out`` (one
+    :func:`imupipe.jit.spread` job a column): a sorted window of the rows at offsets
     ``gap`` ≤ |o| ≤ ``half`` (every |o| ≤ half when ``gap`` is 0), slid row by row: one entry
     replaced on each side (one in all when ``gap`` is 0) by a binary search for the old value
     and a shift of the entries between it and the new value's place.  The first window is
@@ -187,9 +190,8 @@ def _running_median(x: np.ndarray, half: int, gap: int) -> np.ndarray:  # pragma
     ``np.searchsorted`` would add ~3 s of compiling to a first run)."""
     rows, cols = x.shape
     width = 2 * half + 1 if gap == 0 else 2 * (half - gap + 1)
-    out = np.empty((rows, cols))
     window = np.empty(width)
-    for c in range(cols):
+    for c in range(start, cols, step):
         j = 0
         for o in range(-half, half + 1):  # the first row's window, clamped to the edges
             if gap > 0 and abs(o) < gap:
@@ -228,7 +230,6 @@ def _running_median(x: np.ndarray, half: int, gap: int) -> np.ndarray:  # pragma
                         k -= 1
                 window[k] = new
             out[i, c] = 0.5 * (window[(width - 1) // 2] + window[width // 2])
-    return out
 
 
 def running_median(x: np.ndarray, half: int, gap: int = 0) -> np.ndarray:
@@ -246,6 +247,7 @@ def running_median(x: np.ndarray, half: int, gap: int = 0) -> np.ndarray:
         raise ValueError("running_median: a finite 2-D array")
     if not 0 <= gap <= half:
         raise ValueError("running_median: 0 <= gap <= half")
-    if x.shape[0] == 0:
-        return np.empty(x.shape)
-    return _running_median(x, half, gap)
+    out = np.empty(x.shape)
+    if x.shape[0] > 0:
+        spread(lambda start, step: _running_median(x, half, gap, out, start, step), x.shape[1])
+    return out
