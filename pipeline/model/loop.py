@@ -90,7 +90,11 @@ whose Allan error does not fall by χ²₁(0.95) must also be significant (famil
 GLS whitened with K at the :data:`SLOW_K_LEVEL` bound of the model refitted after its
 correction, as the slow kinds are refined (evidence ``p_value_family_k_bound``;
 :func:`_decide`): without the Allan view's support, the time-domain test must hold under the
-random walk the Allan curve allows.
+random walk the Allan curve allows.  Its coefficients' 95 % intervals are then those of that
+GLS (the fitted PSD's in evidence ``intervals_fitted_psd``): on 2 h records of the independent
+generator with a coupling of size 3 (160 records, 103 accepted) the fitted PSD's interval held
+the true coefficient on 86 %, K's bound's on 96 % (size 10, 80 records: 86 % and 96 %),
+1.3× wider.
 
 A lab temperature is as slow as a random walk's wander.  With B and K unresolved (fitted 0)
 the fitted PSD is white at low frequency, and a slow regressor that follows part of the wander
@@ -1203,6 +1207,8 @@ def _time_trial(
         robust = _coupling(ax, state, cand.kind, _whitener(fit_new, new_state, ax, slow=True))
         assert robust is not None
         cand.evidence["p_value_family_k_bound"] = min(1.0, robust.p_value * n_tests)
+        cand.evidence["intervals_fitted_psd"] = dict(cand.intervals)
+        cand.intervals |= {k: v for k, v in robust.intervals.items() if k in cand.params}
     return Trial(
         cand.kind, cand, _p_margin(cand.p_value), flags_ok, new_state, lambda: hold, change
     )

@@ -78,3 +78,16 @@ def test_the_cost_a_size_1_coupling_on_this_wander_is_missed(record) -> None:
     loop, cand = temperature_trials(y, record[2])
     assert loop.accepted == [] and cand.evidence["p_value_family"] < ALPHA
     assert cand.evidence["p_value_family_k_bound"] == pytest.approx(0.0028, rel=0.1)
+
+
+def test_its_interval_is_the_k_bound_one_and_holds_the_truth(record) -> None:
+    """Size 10 on the same wander: under the fitted PSD the wander's share moves the estimate
+    out of its own interval ([8.42e-4, 9.56e-4] rad/s/°C against the true 7.75e-4); the
+    reported interval is the GLS's under K's bound, ~2× wider, and holds it."""
+    y, coef = coupled(record, 10.0)
+    _, cand = temperature_trials(y, record[2])
+    lo, hi = cand.intervals["coefficient"]
+    fitted_lo, fitted_hi = cand.evidence["intervals_fitted_psd"]["coefficient"]
+    assert lo < coef < hi and fitted_lo > coef
+    assert (hi - lo) / (fitted_hi - fitted_lo) > 1.5
+    assert lo < cand.params["coefficient"] < hi
