@@ -1100,7 +1100,6 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
             cand.kind != "sinusoid",
         )
 
-    trials = []
     time_domain = [
         _coupling(ax, state, "temperature", whiten),
         _coupling(ax, state, "supply", whiten),
