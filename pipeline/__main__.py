@@ -1,3 +1,3 @@
-from imupipe.cli import main
+from imupipe.cli import console
 
-main()
+console()

@@ -145,3 +145,48 @@ def test_good_recording_exits_0_with_reports(runs, workdir: Path) -> None:
         assert (out / name).is_file()
     assert not (out / "recording.rrd").exists()  # --no-rrd
     assert f"reports written to {out}/" in stdout
+
+
+CONSOLE_SCRIPT = """
+import atexit, sys, threading, time
+from pathlib import Path
+from imupipe.cli import console
+done = Path(sys.argv[1])
+def late_write():
+    time.sleep(0.3)
+    done.write_text("written")
+threading.Thread(target=late_write).start()
+atexit.register(print, "exit handler ran")
+print("buffered line", end="")
+sys.argv = ["imupipe", *sys.argv[2:]]
+console()
+print("never reached")
+"""
+
+
+@pytest.mark.parametrize(
+    ("args", "status"), [(["info", "/nonexistent.mcap"], 2), (["--help"], 0)]
+)
+def test_console_skips_finalization_but_keeps_status_threads_handlers_and_output(
+    tmp_path: Path, args: list[str], status: int
+) -> None:
+    """``imupipe`` ends with ``os._exit`` (no interpreter finalization): main's exit status,
+    a non-daemon thread's late write, an atexit handler and unflushed stdout all survive."""
+    done = tmp_path / "late.txt"
+    proc = subprocess.run(
+        [sys.executable, "-c", CONSOLE_SCRIPT, str(done), *args],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == status, proc.stderr
+    assert done.read_text() == "written"
+    assert proc.stdout.startswith("buffered line")
+    assert proc.stdout.rstrip().endswith("exit handler ran")
+    assert "never reached" not in proc.stdout
+    assert ("nonexistent.mcap: not a file" in proc.stderr) == (status == 2)
+
+
+def test_the_command_is_the_console_entry_point() -> None:
+    from importlib.metadata import entry_points
+
+    (script,) = entry_points(group="console_scripts", name="imupipe")
+    assert script.value == "imupipe.cli:console"
