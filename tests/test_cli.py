@@ -164,9 +164,7 @@ print("never reached")
 """
 
 
-@pytest.mark.parametrize(
-    ("args", "status"), [(["info", "/nonexistent.mcap"], 2), (["--help"], 0)]
-)
+@pytest.mark.parametrize(("args", "status"), [(["info", "/nonexistent.mcap"], 2), (["--help"], 0)])
 def test_console_skips_finalization_but_keeps_status_threads_handlers_and_output(
     tmp_path: Path, args: list[str], status: int
 ) -> None:
