@@ -1,8 +1,8 @@
 """Benchmark: the first ``imupipe analyze`` after installing (numba's disk cache empty) against a
 warm run, each in a fresh interpreter, on the 5-min sample log.
 
-Three runs per repeat, each ``imupipe.analyze(sample, out)`` with everything a user gets by
-default (figures, recording.rrd, the loop) in a new ``python -c`` process:
+Three runs per repeat, each the ``imupipe analyze SAMPLE --out OUT`` command with everything a
+user gets by default (figures, recording.rrd, the loop), its exit included, in a new process:
 
 * cold: ``NUMBA_CACHE_DIR`` an empty folder; the fit's and the loop's kernels compile in a child
   meanwhile (imupipe.model.ahead);
@@ -30,10 +30,16 @@ import tempfile
 import time
 from pathlib import Path
 
-RUN = """import resource, sys, imupipe
-imupipe.analyze(sys.argv[1], out=sys.argv[2], compile_ahead={})
-own = resource.getrusage(resource.RUSAGE_SELF)
-print(own.ru_utime + own.ru_stime)"""
+RUN = """import atexit, resource, sys
+import imupipe.analysis.analyze as analysis
+from imupipe.cli import console
+if not {}:  # every kernel compiles in the analysing process
+    start_child = analysis.compile_ahead
+    analysis.compile_ahead = lambda loop, enabled=True: start_child(loop, False)
+own = lambda: resource.getrusage(resource.RUSAGE_SELF)
+atexit.register(lambda: print(own().ru_utime + own().ru_stime))
+sys.argv = ["imupipe", "analyze", sys.argv[1], "--out", sys.argv[2], "--quiet"]
+console()"""
 
 
 def run(sample: Path, out: Path, cache: Path, ahead: bool) -> tuple[float, float, float]:
