@@ -180,7 +180,7 @@ def main() -> None:
     core_s = statistics.median(timings[1]) / len(paths)  # one worker, one unit after the other
     print(f"per unit: {core_s:.1f} worker-seconds ({args.duration} at 100 Hz, 1-worker runs)")
     for n in (16, 64, 256):
-        print(f"1,000 units on {n} workers: {1000 * core_s / n / 3600:.2f} h, "
+        print(f"1,000 units on {n} workers: {1000 * core_s / n / 60:.1f} min, "
               f"~{peak_gb:.1f} GB per worker")  # fmt: skip
 
 
