@@ -75,6 +75,29 @@ def spread(kernel: Callable[[int, int], None], jobs: int) -> None:
             done.result()
 
 
+PART_MIN = 1 << 20
+"""Values a thread of a pass over a long series reads at least: a shorter series is read by one
+thread (a thread's start would cost more than its share)."""
+
+
+def parts(size: int) -> int:
+    """Contiguous parts of a pass over ``size`` values, one a thread (:func:`on_parts`): as
+    many as :func:`cores_here`, fewer when a part would hold under :data:`PART_MIN` values."""
+    return max(1, min(cores_here(), size // PART_MIN))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def part_bounds(size: int, parts: int, p: int) -> tuple[int, int]:
+    """Values [start, stop) of part ``p`` of ``parts`` contiguous parts of ``size`` values."""
+    return p * size // parts, (p + 1) * size // parts
+
+
+def on_parts(kernel: Callable[..., None], parts: int, *args: object) -> None:
+    """``kernel(*args, start, step)`` for the ``parts`` parts of a pass (:func:`spread`): the
+    kernel handles parts ``start, start + step, …``, each bounded by :func:`part_bounds`."""
+    spread(lambda start, step: kernel(*args, start, step), parts)
+
+
 def kernel_input(x: npt.ArrayLike, dtype: npt.DTypeLike = None) -> np.ndarray:
     """``x`` as a C-contiguous, read-only array of ``dtype`` (default: its own): a read-only
     view when it already is one, copied only when it is not contiguous or of another dtype."""

@@ -3,6 +3,7 @@ state."""
 
 from __future__ import annotations
 
+import itertools
 import threading
 from types import SimpleNamespace
 
@@ -65,8 +66,10 @@ def test_imported_kernels_are_the_packages_own_compiled_kernels() -> None:
     from imupipe.jit import imported_kernels
 
     kernels = imported_kernels()
-    assert robust._select in kernels and effects._hann_windowed in kernels
-    assert robust._value not in kernels  # inlined into its callers: never compiled alone
+    assert robust._histogram_parts in kernels and effects._hann_windowed in kernels
+    assert (
+        robust._value not in kernels and jit.part_bounds not in kernels
+    )  # inlined into its callers: never compiled alone
     assert all(k.__module__.startswith("imupipe.") for k in kernels)
     assert len(kernels) == len(set(map(id, kernels)))  # a re-exported kernel counted once
 
@@ -140,3 +143,21 @@ def test_spread_raises_a_threads_exception(monkeypatch: pytest.MonkeyPatch) -> N
 
     with pytest.raises(ValueError, match="job 1 failed"):
         jit.spread(kernel, 4)
+
+
+def test_a_long_series_is_read_in_parts_of_at_least_part_min_values(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(jit, "cores_here", lambda: 4)
+    assert jit.parts(jit.PART_MIN * 2 - 1) == 1
+    assert jit.parts(jit.PART_MIN * 2) == 2
+    assert jit.parts(jit.PART_MIN * 100) == 4
+    assert jit.parts(0) == 1
+
+
+@pytest.mark.parametrize(("size", "n_parts"), [(10, 3), (7, 7), (1_000_003, 4)])
+def test_part_bounds_cover_every_value_once_in_order(size: int, n_parts: int) -> None:
+    bounds = [jit.part_bounds(size, n_parts, p) for p in range(n_parts)]
+    assert bounds[0][0] == 0 and bounds[-1][1] == size
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(bounds))
+    assert max(b - a for a, b in bounds) - min(b - a for a, b in bounds) <= 1

@@ -31,7 +31,7 @@ import numpy as np
 import scipy.fft
 from scipy import linalg, special
 
-from imupipe.jit import kernel_input
+from imupipe.jit import kernel_input, on_parts, part_bounds, parts, spread
 from imupipe.stats import robust
 from imupipe.stats.allan import NO_CORRECTION, SparseCorrection
 from imupipe.vocab import CHI2_95
@@ -671,27 +671,61 @@ LEVEL_CHUNK = 1 << 20
 def _block_level(y: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
     """(median of each block of ``block`` samples (the last may be shorter), float32 deviation
     y_i − median of i's block).  The medians are numpy's over chunks of whole blocks (numba's
-    np.median would cost ~1.5 s of compiling on a first run), the deviations one compiled pass."""
+    np.median would cost ~1.5 s of compiling on a first run), the chunks on the usable cores
+    (:func:`imupipe.jit.spread`: numpy's partition releases the GIL); the deviations one
+    compiled pass."""
     n = y.size
     whole = n // block
     level = np.empty((n + block - 1) // block)
-    per_chunk = max(1, LEVEL_CHUNK // block)
-    for b in range(0, whole, per_chunk):
-        rows = y[b * block : min(whole, b + per_chunk) * block].reshape(-1, block)
-        level[b : b + len(rows)] = np.median(rows, axis=1)
+    chunks = range(0, whole, max(1, LEVEL_CHUNK // block))
+
+    def medians(start: int, step: int) -> None:
+        for b in chunks[start::step]:
+            rows = y[b * block : min(whole, b + chunks.step) * block].reshape(-1, block)
+            level[b : b + len(rows)] = np.median(rows, axis=1)
+
+    spread(medians, len(chunks))
     if whole < level.size:
         level[whole] = np.median(y[whole * block :])
     return level, _deviation(y, level, block)
 
 
-@numba.njit(cache=True, nogil=True)
-def _deviation(y: np.ndarray, level: np.ndarray, block: int) -> np.ndarray:  # pragma: no cover
-    """float32 y_i − level of i's block of ``block`` samples."""
+def _deviation(y: np.ndarray, level: np.ndarray, block: int) -> np.ndarray:
+    """float32 y_i − level of i's block of ``block`` samples; the blocks' parts on the usable
+    cores (:func:`imupipe.jit.on_parts`)."""
     dev = np.empty(y.size, np.float32)
-    for b in range(level.size):
-        for i in range(b * block, min(y.size, (b + 1) * block)):
-            dev[i] = y[i] - level[b]
+    n_parts = parts(y.size)
+    on_parts(_deviation_parts, n_parts, y, level, block, dev, n_parts)
     return dev
+
+
+@numba.njit(cache=True, nogil=True)
+def _deviation_parts(
+    y: np.ndarray, level: np.ndarray, block: int, dev: np.ndarray, n_parts: int, start: int,
+    step: int,
+) -> None:  # pragma: no cover (JIT)  # fmt: skip
+    """Parts ``start, start + step, …`` of ``n_parts`` parts of the blocks of
+    :func:`_deviation`."""
+    for p in range(start, n_parts, step):
+        first, stop = part_bounds(level.size, n_parts, p)
+        for b in range(first, stop):
+            for i in range(b * block, min(y.size, (b + 1) * block)):
+                dev[i] = y[i] - level[b]
+
+
+def _beyond_parts(dev: np.ndarray, limit: float) -> np.ndarray:
+    """:func:`_beyond` of the whole ``dev`` (indices in order), its parts on the usable
+    cores."""
+    n_parts = parts(dev.size)
+    found: list[np.ndarray] = [np.empty(0, np.int64)] * n_parts
+
+    def scan(start: int, step: int) -> None:
+        for p in range(start, n_parts, step):
+            first, stop = part_bounds(dev.size, n_parts, p)
+            found[p] = _beyond(dev[first:stop], limit) + first
+
+    spread(scan, n_parts)
+    return np.concatenate(found)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -734,7 +768,7 @@ def spike_candidate(y: np.ndarray, tau0: float) -> Candidate | None:
     lsb = robust.quantum(y)
     thr = float(-special.ndtri(SPIKE_FALSE_ALARM / (2 * len(y))))  # norm.isf
     limit = thr * scale + lsb / 2
-    idx = _beyond(dev, limit)
+    idx = _beyond_parts(dev, limit)
     if idx.size == 0:
         return None
     value = y[idx] - level[idx // min(block, y.size)]

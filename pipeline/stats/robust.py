@@ -14,7 +14,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from imupipe.jit import kernel_input, spread
+from imupipe.jit import kernel_input, on_parts, part_bounds, parts, spread
 
 SELECT_BINS = 1 << 16
 """Histogram bins of each selection pass."""
@@ -30,27 +30,91 @@ def _value(x: np.ndarray, i: int, center: float, absolute: bool, diff: bool) -> 
 
 
 @numba.njit(cache=True, nogil=True)
+def _extent_parts(
+    x: np.ndarray, center: float, absolute: bool, diff: bool, positive: bool,
+    count: np.ndarray, lo: np.ndarray, hi: np.ndarray, finite: np.ndarray, start: int, step: int,
+) -> None:  # pragma: no cover (JIT)  # fmt: skip
+    """Parts ``start, start + step, …`` of :func:`_extent`: each part's count, min and max of
+    the values (only those > 0 if ``positive``) and whether all of them are finite."""
+    for p in range(start, count.size, step):
+        c, low, high, fin = 0, np.inf, -np.inf, True
+        first, stop = part_bounds(len(x) - diff, count.size, p)
+        for i in range(first, stop):
+            v = _value(x, i, center, absolute, diff)
+            if not np.isfinite(v):
+                fin = False
+            elif v > 0 or not positive:
+                c += 1
+                low = min(low, v)
+                high = max(high, v)
+        count[p], lo[p], hi[p], finite[p] = c, low, high, fin
+
+
 def _extent(
     x: np.ndarray, center: float, absolute: bool, diff: bool, positive: bool
-) -> tuple[int, float, float, bool]:  # pragma: no cover (JIT)
+) -> tuple[int, float, float, bool]:
     """(count, min, max) of the values (only those > 0 if ``positive``) and whether all values
-    are finite."""
-    count, lo, hi, finite = 0, np.inf, -np.inf, True
-    for i in range(len(x) - diff):
-        v = _value(x, i, center, absolute, diff)
-        if not np.isfinite(v):
-            finite = False
-        elif v > 0 or not positive:
-            count += 1
-            lo = min(lo, v)
-            hi = max(hi, v)
-    return count, lo, hi, finite
+    are finite; the record's parts on the usable cores."""
+    n_parts = parts(len(x) - diff)
+    count, finite = np.zeros(n_parts, np.int64), np.ones(n_parts, np.bool_)
+    lo, hi = np.full(n_parts, np.inf), np.full(n_parts, -np.inf)
+    on_parts(_extent_parts, n_parts, x, center, absolute, diff, positive, count, lo, hi, finite)
+    return int(count.sum()), float(lo.min()), float(hi.max()), bool(finite.all())
 
 
 @numba.njit(cache=True, nogil=True)
+def _histogram_parts(
+    x: np.ndarray, lo: float, hi: float, scale: float, center: float, absolute: bool,
+    diff: bool, hist: np.ndarray, bin_lo: np.ndarray, bin_hi: np.ndarray, start: int, step: int,
+) -> None:  # pragma: no cover (JIT)  # fmt: skip
+    """Rows ``start, start + step, …`` of the (parts, :data:`SELECT_BINS`) histograms: part p's
+    values in [lo, hi] binned at ``scale`` bins per unit, with each bin's least and greatest
+    member."""
+    for p in range(start, hist.shape[0], step):
+        first, stop = part_bounds(len(x) - diff, hist.shape[0], p)
+        for i in range(first, stop):
+            v = _value(x, i, center, absolute, diff)
+            if lo <= v <= hi:
+                c = min(int((v - lo) * scale), SELECT_BINS - 1)
+                hist[p, c] += 1
+                bin_lo[p, c] = min(bin_lo[p, c], v)
+                bin_hi[p, c] = max(bin_hi[p, c], v)
+
+
+@numba.njit(cache=True, nogil=True)
+def _gather_parts(
+    x: np.ndarray, lo: float, hi: float, center: float, absolute: bool, diff: bool,
+    out: np.ndarray, count: np.ndarray, start: int, step: int,
+) -> None:  # pragma: no cover (JIT)  # fmt: skip
+    """Rows ``start, start + step, …`` of ``out``: part p's values in [lo, hi] in their order
+    (``count[p]`` of them; a branch-free gather, so a row holds one more than it keeps)."""
+    for p in range(start, out.shape[0], step):
+        first, stop = part_bounds(len(x) - diff, out.shape[0], p)
+        j = 0
+        for t in range(first, stop):
+            v = _value(x, t, center, absolute, diff)
+            out[p, j] = v
+            j += (v >= lo) & (v <= hi)
+        count[p] = j
+
+
+@numba.njit(cache=True, nogil=True)
+def _rank_bin(hist: np.ndarray, k: int, below: int) -> tuple[int, int, int]:
+    """(b, the values below bin b, the next non-empty bin after b or :data:`SELECT_BINS`): the
+    bin of ``hist`` that holds rank k, ``below`` values lying under the histogram's range."""
+    b = 0
+    while below + hist[b] <= k:
+        below += hist[b]
+        b += 1
+    nxt = b + 1
+    while nxt < SELECT_BINS and hist[nxt] == 0:
+        nxt += 1
+    return b, below, nxt
+
+
 def _select(
     x: np.ndarray, k: int, lo: float, hi: float, center: float, absolute: bool, diff: bool
-) -> tuple[float, float, np.ndarray, int]:  # pragma: no cover (JIT)
+) -> tuple[float, float, np.ndarray, int]:
     """Order statistics k and k + 1 (0-based) of the values in [lo, hi] (see :func:`_value`),
     by histogram selection, O(n); rank k + 1 is +inf when it does not exist.  Returns them, an
     empty array and 0, or (NaN, the least value above the bin, the bin's values unsorted, rank k's
@@ -62,45 +126,41 @@ def _select(
     that bin or is the smallest member of the next non-empty one.  A bin of equal values
     (quantised data) ends the search; a bin of few values is returned to be sorted (by numpy:
     numba's sort would cost ~1.5 s of compiling on a first run).  Values outside [lo, hi]
-    are not ranked.
+    are not ranked.  Each pass reads the record's contiguous parts on the usable cores
+    (:func:`imupipe.jit.parts`) and adds up their histograms: counts, least and greatest
+    members are the same whatever the parts, and the gathered values come in the record's
+    order.
     """
-    size = len(x) - diff
+    n_parts = parts(len(x) - diff)
     below, above = 0, np.inf  # values below lo; the least value above hi
     while True:
         scale = SELECT_BINS / (hi - lo) if hi > lo else 0.0
         if not np.isfinite(scale):  # a range of subnormal width: one bin
             scale = 0.0
-        hist = np.zeros(SELECT_BINS, np.int64)
-        bin_lo = np.full(SELECT_BINS, np.inf)
-        bin_hi = np.full(SELECT_BINS, -np.inf)
-        for i in range(size):
-            v = _value(x, i, center, absolute, diff)
-            if lo <= v <= hi:
-                c = min(int((v - lo) * scale), SELECT_BINS - 1)
-                hist[c] += 1
-                bin_lo[c] = min(bin_lo[c], v)
-                bin_hi[c] = max(bin_hi[c], v)
-        b = 0
-        while below + hist[b] <= k:
-            below += hist[b]
-            b += 1
-        nxt = b + 1
-        while nxt < SELECT_BINS and hist[nxt] == 0:
-            nxt += 1
+        hist = np.zeros((n_parts, SELECT_BINS), np.int64)
+        bin_lo = np.full((n_parts, SELECT_BINS), np.inf)
+        bin_hi = np.full((n_parts, SELECT_BINS), -np.inf)
+        bins = (hist, bin_lo, bin_hi)
+        on_parts(_histogram_parts, n_parts, x, lo, hi, scale, center, absolute, diff, *bins)
+        hist, low, high = hist.sum(axis=0), bin_lo.min(axis=0), bin_hi.max(axis=0)
+        b, below, nxt = _rank_bin(hist, k, below)
         if nxt < SELECT_BINS:
-            above = bin_lo[nxt]
-        lo, hi = bin_lo[b], bin_hi[b]
+            above = float(low[nxt])
+        lo, hi = float(low[b]), float(high[b])
         i = k - below
         if lo == hi:
             return lo, lo if i + 1 < hist[b] else above, np.empty(0), 0
         if hist[b] <= 4096 or scale == 0.0:
-            rest = np.empty(hist[b] + 1)
-            j = 0
-            for t in range(size):  # branch-free gather of the values in [lo, hi]
-                v = _value(x, t, center, absolute, diff)
-                rest[j] = v
-                j += (v >= lo) & (v <= hi)
-            return np.nan, above, rest[:j], i
+            rows = n_parts if hist[b] <= 4096 else 1  # a row of the bin's size per part
+            rest = np.empty((rows, hist[b] + 1))
+            kept = np.zeros(rows, np.int64)
+            on_parts(_gather_parts, rows, x, lo, hi, center, absolute, diff, rest, kept)
+            return (
+                np.nan,
+                above,
+                np.concatenate([r[:j] for r, j in zip(rest, kept, strict=True)]),
+                i,
+            )
 
 
 def _order_statistics(

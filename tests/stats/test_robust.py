@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from imupipe.stats.robust import mad, median, median_positive, running_median
+from imupipe import jit
+from imupipe.stats.robust import abs_quantile, mad, median, median_positive, running_median
 
 RNG = np.random.default_rng(5)
 CASES = {
@@ -64,6 +65,25 @@ def test_statistics_of_differences_equal_numpy(name):
         np.median(d[d > 0]) if (d > 0).any() else np.nan, rel=0, abs=0, nan_ok=True
     )
     assert mad(x, differences=True) == np.median(np.abs(d - np.median(d)))
+
+
+@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("parts", [2, 3, 7])
+def test_passes_over_several_parts_give_numpys_values(name, parts, monkeypatch):
+    """A long record's passes read contiguous parts on several threads and add up their
+    histograms: the same order statistics as numpy whatever the parts (ties, runs of equal
+    values and a bin gathered from every part included)."""
+    monkeypatch.setattr(jit, "PART_MIN", 1)
+    monkeypatch.setattr(jit, "cores_here", lambda: parts)
+    x = CASES[name]
+    assert jit.parts(x.size) == min(parts, x.size)
+    assert median(x) == pytest.approx(np.median(x), rel=0, abs=0, nan_ok=True)
+    if name in FINITE:
+        assert mad(x) == np.median(np.abs(x - np.median(x)))
+        d = np.diff(x)
+        assert mad(x, differences=True) == np.median(np.abs(d - np.median(d)))
+        assert median_positive(x) == np.median(x[x > 0])
+        assert abs_quantile(x, 0.999) == np.quantile(np.abs(x), 0.999, method="higher")
 
 
 @pytest.mark.parametrize(
