@@ -88,6 +88,31 @@ def test_the_spilled_paths_compile_child_runs_only_on_a_cold_cache(
     assert len(children) == (0 if cached else 1)
 
 
+def test_an_uncached_decoder_kernel_starts_no_compile_child(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A ROS 2 Imu bag never compiles the ADIS16364 burst decoder or the ADIS frame gather: with
+    only those out of numba's cache, the spilled path starts no compile child (it started one on
+    every 24 h run, ~2 s); with one analysis kernel out of it, it does."""
+    import imupipe.device.adis16364 as adis
+    import imupipe.io.mcap_walk as walk
+    import imupipe.stats.allan as allan
+    from imupipe.analysis import analyze as orchestrator
+
+    decoders = [walk._gather, adis._decode_burst]
+    assert all(orchestrator.decoding_kernel(k) for k in decoders)
+    assert not orchestrator.decoding_kernel(allan._block_sums)
+    for uncached, children_expected in [(decoders, 0), ([allan._block_sums], 1)]:
+        children: list[list[str]] = []
+        monkeypatch.setattr(orchestrator, "disk_cached", lambda k, out=uncached: k not in out)
+        monkeypatch.setattr(
+            orchestrator.subprocess, "run", lambda cmd, c=children, **kw: c.append(cmd)
+        )
+        monkeypatch.setattr(orchestrator, "compile_kernels", lambda loop: None)
+        orchestrator.load_kernels(True)
+        assert len(children) == children_expected
+
+
 def test_cores_here_is_the_threads_share_capped_by_numba_num_threads(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:

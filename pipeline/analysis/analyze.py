@@ -22,6 +22,7 @@ from typing import Protocol
 
 import numpy as np
 import polars as pl
+from numba.core.dispatcher import Dispatcher
 from threadpoolctl import threadpool_limits
 
 from imupipe.analysis.condition import (
@@ -448,6 +449,16 @@ def compile_kernels(loop: bool = True) -> None:
     robust.running_median(white.reshape(-1, 2), 16, 2)  # the event detector's local levels
 
 
+DECODE_MODULES = ("imupipe.io.", "imupipe.device.")
+"""Modules whose kernels decode a recording (MCAP records, ADIS16364 bursts)."""
+
+
+def decoding_kernel(kernel: Dispatcher) -> bool:
+    """Whether ``kernel`` is a decoder's (:data:`DECODE_MODULES`): an ADIS16364 burst decoder is
+    never compiled when analysing a ROS 2 Imu bag, so it may stay out of numba's cache."""
+    return kernel.__module__.startswith(DECODE_MODULES)
+
+
 def load_kernels(loop: bool) -> None:
     """Have the kernels compiled into numba's disk cache by a child process, then load them.
 
@@ -455,9 +466,11 @@ def load_kernels(loop: bool) -> None:
     resident under the data (24 h / 1 kHz, cold cache: peak 2.02 GB against 1.81 GB warm);
     a child's memory leaves with it.  Loading from the cache costs this process little.  If the
     child fails (e.g. a read-only cache), the kernels are compiled here as before.  No child
-    when the cache already holds every kernel (it cost ~6 s of a 24 h / 1 kHz run: a Python
-    start, the imports and the loading)."""
-    if not all(disk_cached(k) for k in imported_kernels()):
+    when the cache already holds every kernel of the stages after decoding (it cost ~2-6 s of a
+    24 h / 1 kHz run: a Python start, the imports and the loading); the decoders' kernels
+    (:data:`DECODE_MODULES`) have run or are not needed by then, and the child never compiles
+    them."""
+    if not all(disk_cached(k) for k in imported_kernels() if not decoding_kernel(k)):
         code = f"from imupipe.analysis.analyze import compile_kernels; compile_kernels({loop})"
         subprocess.run([sys.executable, "-c", code], capture_output=True, check=False)
     compile_kernels(loop)

@@ -31,7 +31,7 @@ import numpy as np
 import scipy.fft
 from scipy import linalg, special
 
-from imupipe.jit import kernel_input, on_parts, part_bounds, parts, spread
+from imupipe.jit import cores_here, kernel_input, on_parts, part_bounds, parts, spread
 from imupipe.stats import robust
 from imupipe.stats.allan import NO_CORRECTION, SparseCorrection
 from imupipe.vocab import CHI2_95
@@ -922,11 +922,13 @@ ROLLOFF_SEGMENT = 256
 def welch_psd(y: np.ndarray, tau0: float, seg: int) -> tuple[np.ndarray, np.ndarray]:
     """Welch's PSD (Hann, 50 % overlap; Welch 1967) of the first :data:`PSD_MAX_SAMPLES`
     samples of ``y`` (sampled every ``tau0`` s) in segments of ``seg``: frequencies (Hz) and
-    one-sided PSD (units² / Hz)."""
+    one-sided PSD (units² / Hz).  The segments' FFTs run on the calling thread's cores
+    (``scipy.fft.set_workers``; each segment's transform is the same on any worker)."""
     from scipy import signal  # ~0.5 s to import; most analyses never need a Welch PSD
 
     n = min(len(y), PSD_MAX_SAMPLES)
-    return signal.welch(np.asarray(y[:n], dtype=float), fs=1.0 / tau0, nperseg=seg)
+    with scipy.fft.set_workers(cores_here()):
+        return signal.welch(np.asarray(y[:n], dtype=float), fs=1.0 / tau0, nperseg=seg)
 
 
 Welch = Callable[[int], tuple[np.ndarray, np.ndarray]]

@@ -23,7 +23,7 @@ import numba
 import numpy as np
 from scipy.special import comb, gammaincinv
 
-from imupipe.jit import spread
+from imupipe.jit import kernel_input, spread
 
 ACF_MIN_POINTS = 30
 """Fewest averaged points for which the lag-1 ACF method is used (Riley & Greenhall 2004)."""
@@ -160,15 +160,15 @@ def _acf_noise_id(
     return int(np.rint(_acf_power(src, m, phase, count, dmax)))
 
 
-@numba.njit(cache=True, nogil=True)
-def acf_noise_id(ybar: np.ndarray, dmax: int = 2) -> int:  # pragma: no cover (JIT)
+def acf_noise_id(ybar: np.ndarray, dmax: int = 2) -> int:
     """Power-law exponent alpha of the averaged fractional frequencies ``ybar`` by lag-1 ACF.
 
     Riley & Greenhall 2004, section 3: remove the linear frequency drift, then difference the
     series d times until delta = r1 / (1 + r1) < 0.25 (or d = dmax, 2 for the Allan variance);
     then p = -2 (delta + d) estimates alpha and is rounded to the nearest integer.
     """
-    return _acf_noise_id(ybar, 1, False, ybar.size, dmax)
+    ybar = kernel_input(ybar, np.float64)
+    return int(_acf_noise_id(ybar, 1, False, ybar.size, dmax))
 
 
 def b1_theory(n: int, mu: int) -> float:

@@ -112,6 +112,18 @@ def test_a_welch_band_mean_has_the_hann_windows_variance():
     assert effects.welch_band_variance(256, 1, 0) == np.inf  # an empty band says nothing
 
 
+@pytest.mark.parametrize("cores", [1, 3])
+def test_welch_psd_is_scipys_welch_of_the_first_samples_on_any_number_of_cores(cores, monkeypatch):
+    """The segments' FFTs run on the calling thread's cores: the same PSD, bit for bit, as
+    scipy's Welch on one core, of the first PSD_MAX_SAMPLES samples only."""
+    monkeypatch.setattr(effects, "cores_here", lambda: cores)
+    monkeypatch.setattr(effects, "PSD_MAX_SAMPLES", 30_000)
+    y = np.random.default_rng(3).standard_normal(40_000)
+    f, p = effects.welch_psd(y, 0.01, 1024)
+    f_ref, p_ref = signal.welch(y[:30_000], fs=100.0, nperseg=1024)
+    assert np.array_equal(f, f_ref) and np.array_equal(p, p_ref)
+
+
 @pytest.mark.parametrize("view", ["rolloff", "band_excess"])
 def test_the_spectrum_views_p_values_are_calibrated_on_white_noise(view):
     """On white noise the band ratio's z (ln ratio / its standard error) has unit spread, so
