@@ -64,7 +64,7 @@ print(json.dumps({
 
 LATE = {f"{k.py_func.__module__}.{k.py_func.__qualname__}" for k in ahead.late_kernels(True)}
 
-TWO_DTYPES = {"imupipe.stats.robust._extent", "imupipe.stats.robust._select"}
+TWO_DTYPES = {"imupipe.stats.robust._extent_parts", "imupipe.stats.robust._histogram_parts"}
 """Kernels called on float64 series and on float32 deviations (effects.spike_candidate)."""
 LITERAL_FLAG = {"imupipe.stats.edf._value"}
 """Called with the literal ``phase=True`` by the gather in edf._acf_ids (inlined by LLVM) and
