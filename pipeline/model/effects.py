@@ -672,8 +672,8 @@ def _block_level(y: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
     """(median of each block of ``block`` samples (the last may be shorter), float32 deviation
     y_i − median of i's block).  The medians are numpy's over chunks of whole blocks (numba's
     np.median would cost ~1.5 s of compiling on a first run), the chunks on the usable cores
-    (:func:`imupipe.jit.spread`: numpy's partition releases the GIL); the deviations one
-    compiled pass."""
+    (:func:`imupipe.jit.spread`: numpy's partition releases the GIL); the deviations a
+    compiled pass over the blocks' parts (:func:`_deviation`)."""
     n = y.size
     whole = n // block
     level = np.empty((n + block - 1) // block)
