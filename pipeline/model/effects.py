@@ -822,17 +822,93 @@ def _hann_windowed(
     return out, win_sum, win_sq_sum
 
 
-def _hann_spectrum(
-    y: np.ndarray, correction: SparseCorrection | None = None
-) -> tuple[np.ndarray, float, float]:
-    """(rfft of the Hann-windowed, mean-removed ``y`` minus ``correction`` over its first
-    :data:`PSD_MAX_SAMPLES` samples, Σw, Σw²)."""
+@dataclass(frozen=True)
+class HannSpectrum:
+    """The Hann-windowed periodogram of one series, computed once (:func:`hann_spectrum`) and
+    read by band: the magnitudes |X_k| (float32, k = 0 … n/2) of the rfft of the first ``n``
+    samples (at most :data:`PSD_MAX_SAMPLES`), sampled every ``dt`` s, mean removed and minus a
+    sparse correction, with the window's Σw and Σw² (``win_sum``, ``win_sq_sum``).  The power
+    is in arbitrary units: only shapes and ratios are read from it."""
+
+    magnitude: np.ndarray
+    n: int
+    dt: float
+    win_sum: float
+    win_sq_sum: float
+
+    def periodogram(self, f_lo: float, f_hi: float) -> tuple[np.ndarray, np.ndarray]:
+        """(frequencies Hz, power) of every second bin in [f_lo, f_hi].
+
+        A Hann window's DFT is X(k)/2 − X(k−1)/4 − X(k+1)/4, so for a smooth spectrum the
+        powers of bins k and k+2 correlate by only (1/6)² ≈ 0.03 (adjacent bins: (2/3)² ≈
+        0.44): every second bin gives ordinates close to independent, each ~ S(f) χ²₂ / 2
+        (Brillinger, *Time Series: Data Analysis and Theory*, Thm 5.2.6), the premise of a
+        Whittle likelihood."""
+        step = 1.0 / (self.n * self.dt)
+        top = self.magnitude.size - 1
+        k = np.arange(max(int(np.ceil(f_lo / step)), 1), min(int(f_hi / step), top) + 1)
+        k = k[k % 2 == 0]
+        return k * step, self.magnitude[k].astype(np.float64) ** 2
+
+    def line(self, f_lo: float, f_hi: float) -> dict[str, float]:
+        """Strongest line in [f_lo, f_hi] (parabolic peak); empty below three bins.
+
+        Frequency 95 % interval from the Cramér–Rao bound for a real sinusoid in locally white
+        noise, var(ω) = 24 σ² / (A² N (N² − 1)) (Rife & Boorstyn 1974), σ² from the band's
+        median level; amplitude from the windowed peak (Hann coherent gain 1/2).
+        ``line_p_value``: chance that noise alone puts a bin this far above the band's level —
+        periodogram bins of noise are ~exponential (level = median / ln 2), so the largest of K
+        bins exceeds v times the level with probability 1 − (1 − e^−v)^K (Fisher 1929's test of
+        the largest periodogram ordinate, with the level estimated robustly; the Hann window's
+        correlated bins make it conservative)."""
+        n, dt = self.n, self.dt
+        step = 1.0 / (n * dt)  # bin spacing of np.fft.rfftfreq(n, dt), whose bin k is k * step
+        k = np.arange(max(int(f_lo / step) - 1, 1), min(int(f_hi / step) + 2, n // 2) + 1)
+        band = k[(k * step >= f_lo) & (k * step <= f_hi)]
+        if band.size < 3:
+            return {}
+        # the band and one bin either side, as float64 power: the whole spectrum stays float32
+        first = max(int(band[0]) - 1, 0)
+        spec = self.magnitude[first : int(band[-1]) + 2].astype(np.float64) ** 2
+        band_power = spec[band - first]
+        i = int(band[np.argmax(band_power)])
+        i = min(max(i, 1), n // 2 - 1)
+        a, b, c = np.log(spec[i - 1 - first : i + 2 - first] + 1e-300)
+        # the vertex lies within half a bin of i only where i is a local maximum; at a band edge
+        # below a stronger neighbour outside the band, the line is i itself
+        delta = 0.5 * (a - c) / (a - 2 * b + c) if b >= max(a, c) and (a - 2 * b + c) < 0 else 0.0
+        freq = (i + delta) / (n * dt)
+        amp = 2 * np.sqrt(spec[i - first]) / self.win_sum
+        noise_psd = np.median(band_power) / self.win_sq_sum  # per-sample variance equivalent
+        sigma_f = np.sqrt(24 * noise_psd / (amp**2 * n * (n**2 - 1))) / (2 * np.pi * dt)
+        sigma_f = np.hypot(sigma_f, 0.02 / (n * dt))  # + bias of log-parabolic Hann interpolation
+        ratio = spec[i - first] / np.median(band_power)
+        line_p = -np.expm1(band.size * np.log1p(-np.exp(-np.log(2) * ratio)))
+        return {
+            "frequency_hz": float(freq),
+            "frequency_lo": float(freq - Z95 * sigma_f),
+            "frequency_hi": float(freq + Z95 * sigma_f),
+            "psd_amplitude": float(amp),
+            "line_to_floor": float(ratio),
+            "line_p_value": float(line_p),
+            "psd_samples": n,
+        }
+
+
+def hann_spectrum(
+    y: np.ndarray, dt: float, correction: SparseCorrection | None = None
+) -> HannSpectrum:
+    """The :class:`HannSpectrum` of ``y`` (sampled every ``dt`` s) minus ``correction`` over
+    its first :data:`PSD_MAX_SAMPLES` samples: a longer FFT's buffers would outgrow the analysis
+    of a 24 h / 1 kHz axis, and 2**24 samples already resolve a line to ~1e-4 Hz at 1 kHz."""
     n = min(len(y), PSD_MAX_SAMPLES)
     y = kernel_input(y[:n])
     fix = (correction or NO_CORRECTION).within(0, n)
     mean = (y.sum() - fix.value.sum()) / n
     windowed, win_sum, win_sq_sum = _hann_windowed(y, mean, fix.index, fix.value)
-    return scipy.fft.rfft(windowed, overwrite_x=True), win_sum, win_sq_sum
+    coef = scipy.fft.rfft(windowed, overwrite_x=True)
+    del windowed
+    return HannSpectrum(np.abs(coef), n, float(dt), win_sum, win_sq_sum)
 
 
 def hann_periodogram(
@@ -843,19 +919,9 @@ def hann_periodogram(
     correction: SparseCorrection | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(frequencies Hz, power) of every second bin of the Hann-windowed periodogram of ``y``
-    (sampled every ``dt`` s) minus ``correction`` in [f_lo, f_hi], over its first
-    :data:`PSD_MAX_SAMPLES` samples (the power in arbitrary units: only shapes are fitted).
-
-    A Hann window's DFT is X(k)/2 − X(k−1)/4 − X(k+1)/4, so for a smooth spectrum the powers of
-    bins k and k+2 correlate by only (1/6)² ≈ 0.03 (adjacent bins: (2/3)² ≈ 0.44): every
-    second bin gives ordinates close to independent, each ~ S(f) χ²₂ / 2 (Brillinger,
-    *Time Series: Data Analysis and Theory*, Thm 5.2.6), the premise of a Whittle likelihood.
-    """
-    coef, _, _ = _hann_spectrum(y, correction)
-    step = 1.0 / (min(len(y), PSD_MAX_SAMPLES) * dt)
-    k = np.arange(max(int(np.ceil(f_lo / step)), 1), min(int(f_hi / step), coef.size - 1) + 1)
-    k = k[k % 2 == 0]
-    return k * step, np.abs(coef[k]).astype(np.float64) ** 2
+    (sampled every ``dt`` s) minus ``correction`` in [f_lo, f_hi] (:func:`hann_spectrum`,
+    :meth:`HannSpectrum.periodogram`)."""
+    return hann_spectrum(y, dt, correction).periodogram(f_lo, f_hi)
 
 
 def psd_line(
@@ -865,53 +931,9 @@ def psd_line(
     f_hi: float,
     correction: SparseCorrection | None = None,
 ) -> dict[str, float]:
-    """Strongest line of the Hann-windowed periodogram in [f_lo, f_hi] (parabolic peak) of
-    ``y`` minus ``correction``, over its first :data:`PSD_MAX_SAMPLES` samples at most
-    (``psd_samples`` in the result): a longer FFT's buffers would outgrow the analysis of a
-    24 h / 1 kHz axis, and 2**24 samples already resolve a line to ~1e-4 Hz at 1 kHz.
-
-    Frequency 95 % interval from the Cramér–Rao bound for a real sinusoid in locally white
-    noise, var(ω) = 24 σ² / (A² N (N² − 1)) (Rife & Boorstyn 1974), σ² from the band's median
-    level; amplitude from the windowed peak (Hann coherent gain 1/2).  ``line_p_value``: chance
-    that noise alone puts a bin this far above the band's level — periodogram bins of noise are
-    ~exponential (level = median / ln 2), so the largest of K bins exceeds v times the level
-    with probability 1 − (1 − e^−v)^K (Fisher 1929's test of the largest periodogram ordinate,
-    with the level estimated robustly; the Hann window's correlated bins make it conservative).
-    """
-    coef, win_sum, win_sq_sum = _hann_spectrum(y, correction)
-    n = min(len(y), PSD_MAX_SAMPLES)
-    step = 1.0 / (n * dt)  # bin spacing of np.fft.rfftfreq(n, dt), whose bin k is k * step
-    k = np.arange(max(int(f_lo / step) - 1, 1), min(int(f_hi / step) + 2, n // 2) + 1)
-    band = k[(k * step >= f_lo) & (k * step <= f_hi)]
-    if band.size < 3:
-        return {}
-    # the band and one bin either side, as float64 power: the whole spectrum stays float32
-    first = max(int(band[0]) - 1, 0)
-    spec = np.abs(coef[first : int(band[-1]) + 2]).astype(np.float64) ** 2
-    del coef
-    band_power = spec[band - first]
-    i = int(band[np.argmax(band_power)])
-    i = min(max(i, 1), n // 2 - 1)
-    a, b, c = np.log(spec[i - 1 - first : i + 2 - first] + 1e-300)
-    # the vertex lies within half a bin of i only where i is a local maximum; at a band edge
-    # below a stronger neighbour outside the band, the line is i itself
-    delta = 0.5 * (a - c) / (a - 2 * b + c) if b >= max(a, c) and (a - 2 * b + c) < 0 else 0.0
-    freq = (i + delta) / (n * dt)
-    amp = 2 * np.sqrt(spec[i - first]) / win_sum
-    noise_psd = np.median(band_power) / win_sq_sum  # per-sample variance equivalent
-    sigma_f = np.sqrt(24 * noise_psd / (amp**2 * n * (n**2 - 1))) / (2 * np.pi * dt)
-    sigma_f = np.hypot(sigma_f, 0.02 / (n * dt))  # + bias of the log-parabolic Hann interpolation
-    ratio = spec[i - first] / np.median(band_power)
-    line_p = -np.expm1(band.size * np.log1p(-np.exp(-np.log(2) * ratio)))
-    return {
-        "frequency_hz": float(freq),
-        "frequency_lo": float(freq - Z95 * sigma_f),
-        "frequency_hi": float(freq + Z95 * sigma_f),
-        "psd_amplitude": float(amp),
-        "line_to_floor": float(ratio),
-        "line_p_value": float(line_p),
-        "psd_samples": n,
-    }
+    """Strongest line of the Hann-windowed periodogram of ``y`` (sampled every ``dt`` s) minus
+    ``correction`` in [f_lo, f_hi] (:func:`hann_spectrum`, :meth:`HannSpectrum.line`)."""
+    return hann_spectrum(y, dt, correction).line(f_lo, f_hi)
 
 
 ROLLOFF_BANDS = ((0.05, 0.2), (0.4, 0.5))

@@ -451,3 +451,44 @@ def test_the_sinusoid_search_band_ends_where_the_fit_starts(base, paper_gyro):
     f_min = 0.371 / (ax.tau[-1] / 2)
     record_s = len(state.y_d) * ax.dt
     assert tone.n_options == int(np.ceil((1.6 * 0.371 / 20 - f_min / 1.6) * record_s))
+
+
+def test_an_axis_reads_each_hann_periodogram_from_one_fft(base, paper_gyro, monkeypatch):
+    """A line's wide and local bands (:func:`loop._local_line`), its spread-line fit and the
+    spectrum peak of the block means read one FFT per series while the series and its sparse
+    correction are the same objects — the same numbers as a periodogram computed anew — and a
+    new correction is a new FFT."""
+    _rng, y = base(36)
+    t = np.arange(N) * TAU0
+    y = y + 5 * paper_gyro.b * np.sin(2 * np.pi * 3.0 * t)  # full rate: above 0.2 / ax.dt
+    ax = loop._Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
+    state = loop._State(ax.avar, ax.y_d.copy(), None)
+    fit = state.fit(ax)
+    fix = effects.SparseCorrection(np.array([7]), np.array([1.0]))
+    wide, near, fixed = (
+        effects.psd_line(y, TAU0, 2.0, 4.0),
+        effects.psd_line(y, TAU0, 3 / 1.1, 3 * 1.1),
+        effects.psd_line(y, TAU0, 2.0, 4.0, fix),
+    )
+    computed = []
+    spectrum = effects.hann_spectrum
+
+    def counted(series, dt, fix=None):
+        computed.append((len(series), dt, fix))
+        return spectrum(series, dt, fix)
+
+    monkeypatch.setattr(effects, "hann_spectrum", counted)
+    local = loop._local_line(ax, state, 2.0, 4.0)
+    assert computed == [(N, TAU0, None)]
+    assert local["frequency_hz"] == wide["frequency_hz"]
+    assert local["line_to_floor"] == near["line_to_floor"]
+    peak = loop._spectrum_peak(ax, state, fit)
+    assert computed[1:] == [(len(state.y_d), ax.dt, None)]
+    widths = loop._line_widths(ax, 3.0)
+    centre = loop._spectrum_line(ax, state, 3.0, widths)
+    assert len(computed) == 2  # the full-rate FFT is still held beside the block means'
+    assert abs(centre.frequency_hz - 3.0) < 1e-3
+    assert loop._spectrum_peak(ax, state, fit) == peak and len(computed) == 2
+    state.spikes = fix
+    assert loop._line(ax, state, 2.0, 4.0) == fixed
+    assert computed[2:] == [(N, TAU0, fix)]
