@@ -908,7 +908,9 @@ def hann_spectrum(
     windowed, win_sum, win_sq_sum = _hann_windowed(y, mean, fix.index, fix.value)
     coef = scipy.fft.rfft(windowed, overwrite_x=True)
     del windowed
-    return HannSpectrum(np.abs(coef), n, float(dt), win_sum, win_sq_sum)
+    magnitude = np.abs(coef)
+    magnitude.flags.writeable = False  # a kept spectrum is read by every view that asks
+    return HannSpectrum(magnitude, n, float(dt), win_sum, win_sq_sum)
 
 
 def hann_periodogram(

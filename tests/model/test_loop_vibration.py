@@ -480,6 +480,7 @@ def test_an_axis_reads_each_hann_periodogram_from_one_fft(base, paper_gyro, monk
     monkeypatch.setattr(effects, "hann_spectrum", counted)
     local = loop._local_line(ax, state, 2.0, 4.0)
     assert computed == [(N, TAU0, None)]
+    assert not ax.hann(y, TAU0).magnitude.flags.writeable  # kept: read-only
     assert local["frequency_hz"] == wide["frequency_hz"]
     assert local["line_to_floor"] == near["line_to_floor"]
     peak = loop._spectrum_peak(ax, state, fit)
