@@ -836,6 +836,11 @@ class HannSpectrum:
     win_sum: float
     win_sq_sum: float
 
+    @property
+    def bin_hz(self) -> float:
+        """Bin spacing (Hz) of ``np.fft.rfftfreq(n, dt)``, whose bin k is k · bin_hz."""
+        return 1.0 / (self.n * self.dt)
+
     def periodogram(self, f_lo: float, f_hi: float) -> tuple[np.ndarray, np.ndarray]:
         """(frequencies Hz, power) of every second bin in [f_lo, f_hi].
 
@@ -844,7 +849,7 @@ class HannSpectrum:
         0.44): every second bin gives ordinates close to independent, each ~ S(f) χ²₂ / 2
         (Brillinger, *Time Series: Data Analysis and Theory*, Thm 5.2.6), the premise of a
         Whittle likelihood."""
-        step = 1.0 / (self.n * self.dt)
+        step = self.bin_hz
         top = self.magnitude.size - 1
         k = np.arange(max(int(np.ceil(f_lo / step)), 1), min(int(f_hi / step), top) + 1)
         k = k[k % 2 == 0]
@@ -861,8 +866,7 @@ class HannSpectrum:
         bins exceeds v times the level with probability 1 − (1 − e^−v)^K (Fisher 1929's test of
         the largest periodogram ordinate, with the level estimated robustly; the Hann window's
         correlated bins make it conservative)."""
-        n, dt = self.n, self.dt
-        step = 1.0 / (n * dt)  # bin spacing of np.fft.rfftfreq(n, dt), whose bin k is k * step
+        n, dt, step = self.n, self.dt, self.bin_hz
         k = np.arange(max(int(f_lo / step) - 1, 1), min(int(f_hi / step) + 2, n // 2) + 1)
         band = k[(k * step >= f_lo) & (k * step <= f_hi)]
         if band.size < 3:
