@@ -247,8 +247,13 @@ def report_markdown(
     if is_adis16364(result):
         md.append(f"Paper: {PAPER_SOURCE}.")
     if datasheet is not None:
-        # part and source come from the user's file: JSON-quoted, no markdown or line breaks
-        md.append(f"Datasheet {json.dumps(datasheet.part)}: {json.dumps(datasheet.source)}.")
+        # part and source come from the user's file: JSON-quoted (no line breaks), letters
+        # such as č and § as they are, every other non-printable character escaped
+        part, source = (
+            printable(json.dumps(text, ensure_ascii=False))
+            for text in (datasheet.part, datasheet.source)
+        )
+        md.append(f"Datasheet {part}: {source}.")
     md += [
         "",
         _md_table(*paper_rows(result, datasheet)),

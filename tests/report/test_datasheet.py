@@ -66,6 +66,22 @@ def test_given_datasheet_fills_its_column(tmp_path: Path) -> None:
     assert 'Datasheet "ADIS16405": "datasheet rev. B | table 1".' in md
 
 
+def test_datasheet_names_keep_their_letters_and_escape_the_rest() -> None:
+    """The shipped sheet's source names F. Adamčik and §4 as written (report.md showed their
+    JSON escapes); a line break, a terminal escape and a bidi override from a user's sheet stay
+    escaped on one line."""
+    md = report_markdown(result(SCHEMA_NAME), {}, adis16364())
+    line = next(ln for ln in md.splitlines() if ln.startswith("Datasheet "))
+    assert "Adamčik" in line and "§4" in line and "\\u" not in line
+    hostile = parse_datasheet(
+        'part = "X\\u202eY"\nsource = "a\\nb\\u001b[2J"\n' + SHEET.split("\n", 3)[3], "hostile.toml"
+    )
+    md = report_markdown(result("sensor_msgs/msg/Imu"), {}, hostile)
+    line = next(ln for ln in md.splitlines() if ln.startswith("Datasheet "))
+    assert line == 'Datasheet "X\\u202eY": "a\\nb\\u001b[2J".'
+    assert not any(c in md for c in ("\u202e", "\x1b"))
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [
