@@ -23,6 +23,7 @@ Two families (issue 4):
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -215,9 +216,10 @@ class Whitener:
     consecutive *observed* coarse blocks o_i, each the sum of the coarse differences from o_i
     to o_{i+1}, so their covariance is A Γ Aᵀ (Γ the Toeplitz covariance above, A the 0/1
     summing matrix) — the exact Gaussian likelihood of the observed block means (missing data
-    marginalised out), whitened by the inverse of its Cholesky factor.  The level across a gap
-    still counts (its variance grows with the gap's length under a random walk); the fill of a
-    gap, a noise-free line, is never read as data.
+    marginalised out), whitened by forward substitution with its Cholesky factor L (L⁻¹ itself
+    is formed only when read: :attr:`inv_chol`).  The level across a gap still counts (its
+    variance grows with the gap's length under a random walk); the fill of a gap, a noise-free
+    line, is never read as data.
     """
 
     def __init__(self, psd: NoisePsd, n: int, dt: float, masked: np.ndarray | None = None) -> None:
@@ -239,13 +241,44 @@ class Whitener:
         gamma[0] *= 1.0 + NUGGET
         self.blocks = observed_blocks(masked, m + 1, self.factor)
         """Index of each coarse block the differences read (all of them without exclusions)."""
+        self._chol: np.ndarray | None = None
+        """The lower Cholesky factor L of the masked covariance (``None``: Levinson's L⁻¹)."""
         if len(self.blocks) == m + 1:
-            self.inv_chol = _innovations(gamma)
+            self._inv_chol = _read_only(_innovations(gamma))
         else:
             cov = _summed_covariance(gamma, self.blocks)
-            self.inv_chol = _inverse_cholesky(cov)
+            self._chol = _read_only(linalg.cholesky(cov, lower=True, overwrite_a=True))
         # whitened constant difference: a linear rate ramp, the model's R term (nuisance)
-        self.drift = self.inv_chol @ np.diff(self.blocks).astype(float)
+        self.drift = _read_only(self.whitened(np.diff(self.blocks).astype(float)))
+        self.blocks.flags.writeable = False
+
+    @functools.cached_property
+    def inv_chol(self) -> np.ndarray:
+        """L⁻¹ (lower triangular, read-only): row t turns the differences into their t-th
+        standardised innovation.  With blocks left out it is inverted from L when first read
+        (LAPACK trtri, m³/3 flops: the bias-step scan reads its columns); whitening itself
+        solves with L (:meth:`whitened`), which most whiteners a loop builds only need."""
+        if self._chol is None:
+            return self._inv_chol
+        inv, info = linalg.lapack.dtrtri(self._chol, lower=1)
+        if info != 0:  # a zero pivot: potrf would have refused the matrix first
+            raise linalg.LinAlgError(f"triangular inverse failed (LAPACK dtrtri info {info})")
+        return _read_only(inv)
+
+    @property
+    def log_det(self) -> float:
+        """ln det Σ of the differences' covariance: 2 Σ ln Lₜₜ (Lₜₜ = √vₜ, the innovations'
+        standard deviations)."""
+        if self._chol is None:
+            return -2 * float(np.sum(np.log(np.diag(self._inv_chol))))
+        return 2 * float(np.sum(np.log(np.diag(self._chol))))
+
+    def whitened(self, d: np.ndarray) -> np.ndarray:
+        """L⁻¹ ``d``: the differences ``d`` (m,) or (m, k) as standardised innovations (with
+        blocks left out by forward substitution with L, O(m²) a column)."""
+        if self._chol is None:
+            return self._inv_chol @ d
+        return linalg.solve_triangular(self._chol, d, lower=True, check_finite=False)
 
     def coarse(self, v: np.ndarray) -> np.ndarray:
         """Coarse block means of ``v`` (n,) or (n, k) (an incomplete last block is dropped)."""
@@ -254,17 +287,12 @@ class Whitener:
 
     def __call__(self, v: np.ndarray) -> np.ndarray:
         """Whitened differences of the observed coarse block means of ``v``."""
-        return self.inv_chol @ np.diff(self.coarse(v)[self.blocks], axis=0)
+        return self.whitened(np.diff(self.coarse(v)[self.blocks], axis=0))
 
 
-def _inverse_cholesky(cov: np.ndarray) -> np.ndarray:
-    """L⁻¹ for the lower Cholesky factor L of ``cov`` (LAPACK potrf, then trtri: the inverse of
-    a triangular matrix in m³/3 flops, half of solving L X = I column by column)."""
-    chol = linalg.cholesky(cov, lower=True)  # its upper triangle zeroed
-    inv, info = linalg.lapack.dtrtri(chol, lower=1, overwrite_c=1)
-    if info != 0:  # a zero pivot: potrf would have refused the matrix first
-        raise linalg.LinAlgError(f"triangular inverse failed (LAPACK dtrtri info {info})")
-    return inv
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
 
 
 MAX_FILLED_FRACTION = 0.01

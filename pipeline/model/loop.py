@@ -504,14 +504,9 @@ class _Axis:
         the model a round's candidate was scored with is the next round's model, and a masked
         whitener costs an O(m³) Cholesky (~12 % of them were built twice on the real
         recordings)."""
-
-        def build() -> effects.Whitener:
-            made = effects.Whitener(psd, len(self.y_d), self.dt, self.masked_d)
-            for array in (made.inv_chol, made.drift, made.blocks):
-                array.flags.writeable = False
-            return made
-
-        return self._whiteners.get(psd, (), build)
+        return self._whiteners.get(
+            psd, (), lambda: effects.Whitener(psd, len(self.y_d), self.dt, self.masked_d)
+        )
 
     def time_fit(self, fit: ieee952.CompositeFit, shapes: Shapes, y_d: np.ndarray) -> TimeFit:
         """:func:`time_domain_fit` of ``y_d`` (this axis' block means, maybe corrected) with
@@ -985,8 +980,7 @@ def _whitened_fit(whiten: effects.Whitener, shapes: Shapes, y_d: np.ndarray, dt:
     )
     r = yw - u @ np.linalg.lstsq(u, yw, rcond=None)[0]
     dof = max(len(r) - u.shape[1], 1)
-    log_det = -2 * float(np.sum(np.log(np.diag(whiten.inv_chol))))  # L⁻¹ diag: 1/√v_t
-    return TimeFit(float(r @ r) / dof, dof, log_det)
+    return TimeFit(float(r @ r) / dof, dof, whiten.log_det)
 
 
 def _judge(
