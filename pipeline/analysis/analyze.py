@@ -40,7 +40,7 @@ from imupipe.errors import ImupipeError, TooFewFramesError
 from imupipe.io.columns import HOUSEKEEPING, ColumnSource, open_columns
 from imupipe.io.decode import ImuRecording
 from imupipe.jit import disk_cached, imported_kernels
-from imupipe.model.ahead import compile_ahead
+from imupipe.model.ahead import compile_ahead, compile_late_kernels
 from imupipe.model.effects import Candidate, psd_line, spike_candidate
 from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
@@ -436,17 +436,22 @@ def axis_concurrency(options: AnalyzeOptions, peak_bytes: int, samples: int) -> 
 
 def compile_kernels(loop: bool = True) -> None:
     """Compile the numba kernels (or load them from numba's disk cache) on a few thousand
-    synthetic samples: every kernel the analysis calls, with the types it calls them with."""
+    synthetic samples: every kernel the analysis calls, with the types it calls them with —
+    those only a record with gaps reaches included (the gap-tolerant Allan sums, the masked
+    whitener), or :func:`load_kernels` would start its child on every run until one came."""
     rng = np.random.default_rng(0)
     white = rng.standard_normal(4096)
     axis_result("gyro_x", white, allan_curves([white], 0.01)[0], 0.01, None, None, loop)
+    allan_curves([white], 0.01, excluded=np.arange(white.size) % 1000 == 7)  # with gaps
     b1_noise_id(white, 100)  # white phase: the R(n) branch
     psd_line(
         white, 0.01, 10.0, 20.0, spike_candidate(white + 50.0 * (np.arange(4096) == 7), 0.01).spikes
     )
     robust.median_positive(np.cumsum(white), differences=True)
     robust.mad(np.cumsum(white), differences=True)
+    robust.median(np.append(white, 1e12))  # one bin of many values: gathered (real records)
     robust.running_median(white.reshape(-1, 2), 16, 2)  # the event detector's local levels
+    compile_late_kernels(loop)  # the fit's and the loop's, whatever the sample took
 
 
 DECODE_MODULES = ("imupipe.io.", "imupipe.device.")

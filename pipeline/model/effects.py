@@ -333,9 +333,28 @@ def _summed_covariance(gamma: np.ndarray, blocks: np.ndarray) -> np.ndarray:
     increments = np.empty(m + 1)  # C(k) − C(k − 1) = γ(0) + 2 Σ_{0<l<k} γ(l)
     increments[0] = 0.0
     increments[1:] = 2 * np.cumsum(gamma) - gamma[0]
-    var_sum = np.cumsum(increments)
-    c = var_sum[np.abs(blocks[:, None] - blocks[None, :])]  # (hᵢ, lⱼ) = (bᵢ₊₁, bⱼ)
-    return 0.5 * (c[1:, :-1] + c[:-1, 1:] - c[1:, 1:] - c[:-1, :-1])
+    return _rectangle_sums(np.cumsum(increments), kernel_input(blocks, np.int64))
+
+
+@numba.njit(cache=True, nogil=True)
+def _rectangle_sums(var_sum: np.ndarray, blocks: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """½[C(|bᵢ₊₁ − bⱼ|) + C(|bᵢ − bⱼ₊₁|) − C(|bᵢ₊₁ − bⱼ₊₁|) − C(|bᵢ − bⱼ|)] for every pair of
+    differences (i, j), C = ``var_sum``: one pass, the lower triangle mirrored (the matrix is
+    symmetric to the bit: the sum's two first terms swap, and IEEE addition commutes), instead
+    of numpy's (m + 1)² index, gather and four shifted copies (7 ms at m = 1023, 136 times on a
+    real ADIS16405 unit's loop)."""
+    m = blocks.size - 1
+    out = np.empty((m, m))
+    for i in range(m):
+        for j in range(i + 1):
+            out[i, j] = 0.5 * (
+                var_sum[abs(blocks[i + 1] - blocks[j])]
+                + var_sum[abs(blocks[i] - blocks[j + 1])]
+                - var_sum[abs(blocks[i + 1] - blocks[j + 1])]
+                - var_sum[abs(blocks[i] - blocks[j])]
+            )
+            out[j, i] = out[i, j]
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
