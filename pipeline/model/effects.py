@@ -23,6 +23,7 @@ Two families (issue 4):
 
 from __future__ import annotations
 
+import ctypes
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -30,6 +31,7 @@ from dataclasses import dataclass, field, replace
 import numba
 import numpy as np
 import scipy.fft
+from numba.extending import get_cython_function_address
 from scipy import linalg, special
 
 from imupipe.jit import cores_here, kernel_input, on_parts, part_bounds, parts, spread
@@ -247,7 +249,7 @@ class Whitener:
             self._inv_chol = _read_only(_innovations(gamma))
         else:
             cov = _summed_covariance(gamma, self.blocks)
-            self._chol = _read_only(linalg.cholesky(cov, lower=True, overwrite_a=True))
+            self._chol = _read_only(_cholesky(cov))
         # whitened constant difference: a linear rate ramp, the model's R term (nuisance)
         self.drift = _read_only(self.whitened(np.diff(self.blocks).astype(float)))
         self.blocks.flags.writeable = False
@@ -288,6 +290,31 @@ class Whitener:
     def __call__(self, v: np.ndarray) -> np.ndarray:
         """Whitened differences of the observed coarse block means of ``v``."""
         return self.whitened(np.diff(self.coarse(v)[self.blocks], axis=0))
+
+
+_INT = ctypes.POINTER(ctypes.c_int)
+_DPOTRF = ctypes.CFUNCTYPE(None, ctypes.c_char_p, _INT, ctypes.c_void_p, _INT, _INT)(
+    get_cython_function_address("scipy.linalg.cython_lapack", "dpotrf")
+)
+"""LAPACK dpotrf, scipy's own (``scipy.linalg.cython_lapack``), called by ctypes: a foreign
+call that releases the GIL, where ``scipy.linalg.cholesky`` holds it for the whole
+factorisation (py-spy on a real ADIS16405 unit: 2.5 s of the two axis threads' loops held the
+GIL in it, each whitener's 13 ms keeping the other thread's Python waiting)."""
+
+
+def _cholesky(cov: np.ndarray) -> np.ndarray:
+    """The lower Cholesky factor L of the symmetric ``cov`` (C-contiguous, overwritten; returned
+    as a Fortran-ordered view, its upper triangle zero).  ``cov`` is symmetric to the bit
+    (:func:`_rectangle_sums`), so its C buffer is its own Fortran layout: dpotrf('L') on it is
+    what ``scipy.linalg.cholesky(cov, lower=True)`` computes on its Fortran copy, bit for bit
+    (``tests/model/test_whitener.py``)."""
+    n, info = ctypes.c_int(len(cov)), ctypes.c_int(0)
+    _DPOTRF(b"L", ctypes.byref(n), cov.ctypes.data, ctypes.byref(n), ctypes.byref(info))
+    if info.value != 0:
+        raise linalg.LinAlgError(f"covariance not positive definite (LAPACK dpotrf {info.value})")
+    for i in range(1, len(cov)):  # the C view holds Lᵀ: its lower triangle is cov's still
+        cov[i, :i] = 0.0
+    return cov.T
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:

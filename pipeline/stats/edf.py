@@ -19,6 +19,8 @@ All functions work on dimensionless numbers; data arrays may be in any unit.
 
 from __future__ import annotations
 
+import functools
+
 import numba
 import numpy as np
 from scipy.special import comb, gammaincinv
@@ -311,6 +313,10 @@ def noise_ids(x: np.ndarray, m: np.ndarray, redder_tail: bool = False) -> np.nda
     return alphas
 
 
+EDF_KEPT = 8192
+"""Values of :func:`edf_oadev` kept (a float each, with its three integer arguments)."""
+
+
 def _sw(t: np.ndarray, alpha: int) -> np.ndarray:
     """Greenhall & Riley 2003 eq. (7): generalised autocovariance sw(t) of noise type alpha."""
     at = np.abs(t)
@@ -345,6 +351,7 @@ def _basic_sum(j: int, m_terms: float, s: float, f: float, alpha: int, d: int) -
     return float(_sz(np.array(0.0), f, alpha, d) ** 2 + inner + last)
 
 
+@functools.lru_cache(maxsize=EDF_KEPT)
 def edf_oadev(alpha: int, m: int, n_phase: int) -> float:
     """Equivalent degrees of freedom of the overlapping Allan variance (d = 2, F = S = m).
 
@@ -352,6 +359,11 @@ def edf_oadev(alpha: int, m: int, n_phase: int) -> float:
     ``n_phase`` is the number of phase points N; L = m/F + m d = 2m + 1, M = N - 2m terms,
     J = min(M, (d + 1) S), r = M/S.  Case 4 with K = ceil(r) <= d (white PM, very few terms)
     sums the exact correlations of the d-th differences, rho_k = (-1)**k C(2d, d+k) / C(2d, d).
+
+    Memoised (a pure function of three integers, :data:`EDF_KEPT` kept): a record with gaps
+    sums it over its runs' lengths at every factor (``allan.edf_runs``), and the loop asks for
+    the curves of the same runs again — 4491 calls for 773 values on a real ADIS16405 unit,
+    1.3 s of Python holding the GIL while the other axis' thread waited.
     """
     d = 2
     s = float(m)

@@ -99,11 +99,27 @@ def test_without_a_masked_block_the_levinson_whitener_is_unchanged(monkeypatch):
     def no_cholesky(*args, **kwargs):
         raise AssertionError("the gap-free whitener factorised the full covariance")
 
-    monkeypatch.setattr(effects.linalg, "cholesky", no_cholesky)
+    monkeypatch.setattr(effects, "_cholesky", no_cholesky)
     plain = effects.Whitener(psd, N_D, DT)
     unmasked = effects.Whitener(psd, N_D, DT, np.zeros(N_D, bool))
     assert np.array_equal(plain.inv_chol, unmasked.inv_chol)
     assert np.array_equal(plain.blocks, np.arange(1000))
+
+
+def test_the_masked_covariance_is_factorised_as_scipy_does_without_holding_the_gil():
+    """``effects._cholesky`` calls scipy's LAPACK dpotrf through ctypes (which releases the GIL;
+    ``scipy.linalg.cholesky`` holds it): the same factor, bit for bit, on a gapped record's
+    covariance (symmetric to the bit); a matrix that is not positive definite is refused."""
+    gamma = 1e-6 * np.exp(-np.arange(1000) / 40.0)
+    gamma[0] *= 3.0
+    blocks = effects.observed_blocks(_gapped(), 1000, 3)
+    cov = effects._summed_covariance(gamma, blocks)
+    assert np.array_equal(cov, cov.T)
+    chol = effects._cholesky(cov.copy())
+    assert np.array_equal(chol, effects.linalg.cholesky(cov, lower=True))
+    assert chol[0, 1] == 0.0 and chol[1, 0] != 0.0
+    with pytest.raises(effects.linalg.LinAlgError, match="not positive definite"):
+        effects._cholesky(-cov)
 
 
 def test_a_mask_leaving_too_few_blocks_is_not_applied():

@@ -146,3 +146,21 @@ def test_mvar_over_avar_streams_the_numpy_formula():
         moving = c[m:] - c[:-m]
         expected = (moving @ moving) / (moving.size * m**2) / ((d2 @ d2) / d2.size)
         assert _mvar_over_avar(x, m) == pytest.approx(expected, rel=1e-12)
+
+
+def test_a_gapped_curve_computes_each_run_lengths_edf_once() -> None:
+    """``edf_oadev`` is memoised: a record with gaps sums it over its runs' lengths at every
+    factor, and a second curve of the same runs (the loop's corrected curves) computes none
+    again; the memoised values are the algorithm's own."""
+    y = np.random.default_rng(4).standard_normal(20_000)
+    excluded = np.zeros(y.size, bool)
+    excluded[np.random.default_rng(5).choice(y.size, 40, replace=False)] = True  # 41 runs
+    edf_oadev.cache_clear()
+    first = allan_curves(y, 0.01, excluded=excluded)[0]
+    computed = edf_oadev.cache_info()
+    assert computed.misses > 100 and computed.hits == 0
+    again = allan_curves(1.5 * y, 0.01, excluded=excluded)[0]
+    assert edf_oadev.cache_info()[:2] == (computed.misses, computed.misses)  # (hits, misses)
+    assert np.array_equal(first.edf, again.edf)
+    for args in [(0, 10, 2001), (-1, 37, 900), (2, 100, 250), (1, 5, 30)]:
+        assert edf_oadev(*args) == edf_oadev.__wrapped__(*args)
