@@ -1,4 +1,4 @@
-"""Benchmark: the whole ``imupipe analyze`` of a 12 h / 100 Hz ADIS16364 recording against
+"""Benchmark: the whole ``imupipe analyze`` of a recording (12 h / 100 Hz ADIS16364) against
 allantools' bare overlapping ADEV of the same six axes at the same taus, in one process.
 
 The recording is ``imupipe record --duration 12h`` (4.32 M frames; written to ``--file`` unless
@@ -12,6 +12,13 @@ the analysis' own taus.  Both are timed by wall clock and by CPU time of the who
 steadier figure, so the load average is printed too.
 
     python benchmarks/bench_analysis.py [--file /tmp/imupipe_12h.mcap] [--repeat 1]
+
+``--file`` may also name a recording made elsewhere, e.g. the real ADIS16405 unit as a ROS 2
+bag (``benchmarks/adis16405_bag.py``), whose loop has events excised and many more candidates
+to weigh than a simulated night:
+
+    python benchmarks/adis16405_bag.py ../shared/reference/adis16405 /tmp/adis16405_bag
+    python benchmarks/bench_analysis.py --file /tmp/adis16405_bag --repeat 3
 """
 
 from __future__ import annotations
@@ -49,7 +56,7 @@ def main() -> None:
     ap.add_argument("--file", type=Path, default=Path(tempfile.gettempdir()) / "imupipe_12h.mcap")
     ap.add_argument("--repeat", type=int, default=1, help="runs of each; the best is kept")
     args = ap.parse_args()
-    if not args.file.is_file():
+    if not args.file.exists():
         imupipe.record(args.file, duration="12h")
     compile_kernels()  # load (or compile) the numba kernels: not what is measured
     ours: list[tuple[float, float]] = []
