@@ -40,8 +40,8 @@ from imupipe.errors import ImupipeError, TooFewFramesError
 from imupipe.io.columns import HOUSEKEEPING, ColumnSource, open_columns
 from imupipe.io.decode import ImuRecording
 from imupipe.jit import disk_cached, imported_kernels
-from imupipe.model.ahead import compile_ahead, compile_late_kernels
-from imupipe.model.effects import Candidate, psd_line, spike_candidate
+from imupipe.model.ahead import compile_ahead
+from imupipe.model.effects import Candidate, NoisePsd, Whitener, psd_line, spike_candidate
 from imupipe.model.ieee952 import fit_noise_terms
 from imupipe.model.loop import AxisSignals, aux_block_means, close_loop
 from imupipe.pages import small_pages
@@ -442,7 +442,6 @@ def compile_kernels(loop: bool = True) -> None:
     rng = np.random.default_rng(0)
     white = rng.standard_normal(4096)
     axis_result("gyro_x", white, allan_curves([white], 0.01)[0], 0.01, None, None, loop)
-    allan_curves([white], 0.01, excluded=np.arange(white.size) % 1000 == 7)  # with gaps
     b1_noise_id(white, 100)  # white phase: the R(n) branch
     psd_line(
         white, 0.01, 10.0, 20.0, spike_candidate(white + 50.0 * (np.arange(4096) == 7), 0.01).spikes
@@ -451,7 +450,9 @@ def compile_kernels(loop: bool = True) -> None:
     robust.mad(np.cumsum(white), differences=True)
     robust.median(np.append(white, 1e12))  # one bin of many values: gathered (real records)
     robust.running_median(white.reshape(-1, 2), 16, 2)  # the event detector's local levels
-    compile_late_kernels(loop)  # the fit's and the loop's, whatever the sample took
+    gap = np.arange(white.size) % 1000 == 7
+    allan_curves([white], 0.01, excluded=gap)  # the gap-tolerant sums
+    Whitener(NoisePsd(1.0, 0.0, np.inf, 0.0), white.size, 0.01, gap)  # blocks left out
 
 
 DECODE_MODULES = ("imupipe.io.", "imupipe.device.")

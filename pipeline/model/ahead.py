@@ -29,9 +29,8 @@ from imupipe.stats.allan import AllanCurve
 
 FIT_KERNELS = (ieee952._fit_gamma, ieee952._nnls, ieee952._passive_lstsq)
 """The IEEE 952 fit's kernels (~7 s of CPU to compile, the longest chain)."""
-LOOP_KERNELS = (effects._innovations, effects._rectangle_sums, effects._hann_windowed)
-"""Kernels first called by the closed loop: its whitener (gap-free, and with blocks left out)
-and its periodogram.  (The R(n) noise
+LOOP_KERNELS = (effects._innovations, effects._hann_windowed)
+"""Kernels first called by the closed loop: its whitener and its periodogram.  (The R(n) noise
 identification, ``edf._mvar_over_avar``, is not one: the fit's Allan curve reaches T/2, whose
 last factors the first Allan curve already identifies with it.)"""
 WAIT_S = 300.0
@@ -40,8 +39,7 @@ WAIT_S = 300.0
 
 def compile_late_kernels(loop: bool) -> None:
     """Compile :data:`FIT_KERNELS` (and :data:`LOOP_KERNELS` with ``loop``) into numba's disk
-    cache by calling them on synthetic inputs: a white-noise Allan curve and white noise (its
-    whitener also with a gap's blocks left out)."""
+    cache by calling them on synthetic inputs: a white-noise Allan curve and white noise."""
     tau = np.geomspace(0.01, 100.0, 41)
     adev = 1e-3 / np.sqrt(tau)
     n_terms = np.round(1e4 / tau).astype(np.int64)
@@ -50,10 +48,7 @@ def compile_late_kernels(loop: bool) -> None:
     ieee952.fit_noise_terms(curve, "gyro", 0.01)
     if loop:
         white = np.random.default_rng(0).standard_normal(4096)
-        gap = np.zeros(white.size, bool)
-        gap[1000:1100] = True
-        for masked in (None, gap):
-            effects.Whitener(effects.NoisePsd(1.0, 0.0, np.inf, 0.0), white.size, 0.01, masked)
+        effects.Whitener(effects.NoisePsd(1.0, 0.0, np.inf, 0.0), white.size, 0.01)
         effects.psd_line(white, 0.01, 10.0, 20.0)
 
 
