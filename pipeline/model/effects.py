@@ -259,7 +259,7 @@ class Whitener:
         """L⁻¹ (lower triangular, read-only): row t turns the differences into their t-th
         standardised innovation.  With blocks left out it is inverted from L when first read
         (LAPACK trtri, m³/3 flops: the bias-step scan reads its columns); whitening itself
-        solves with L (:meth:`whitened`), which most whiteners a loop builds only need."""
+        solves with L (:meth:`whitened`), and that is all most of a loop's whiteners do."""
         if self._chol is None:
             return self._inv_chol
         inv, info = linalg.lapack.dtrtri(self._chol, lower=1)
