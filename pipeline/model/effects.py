@@ -241,7 +241,7 @@ class Whitener:
         # under a strong line's hump) has a band-limited spectrum whose Toeplitz covariance is
         # singular to rounding; its innovations' variances went negative (NaN errors)
         gamma[0] *= 1.0 + NUGGET
-        self.blocks = observed_blocks(masked, m + 1, self.factor)
+        self.blocks = _read_only(observed_blocks(masked, m + 1, self.factor))
         """Index of each coarse block the differences read (all of them without exclusions)."""
         self._chol: np.ndarray | None = None
         """The lower Cholesky factor L of the masked covariance (``None``: Levinson's L⁻¹)."""
@@ -252,7 +252,6 @@ class Whitener:
             self._chol = _read_only(_cholesky(cov))
         # whitened constant difference: a linear rate ramp, the model's R term (nuisance)
         self.drift = _read_only(self.whitened(np.diff(self.blocks).astype(float)))
-        self.blocks.flags.writeable = False
 
     @functools.cached_property
     def inv_chol(self) -> np.ndarray:
