@@ -1,14 +1,19 @@
 """imupipe.pages: an analysis allocates its large arrays without numpy's huge-page advice, and
-leaves numpy's setting as it found it."""
+leaves numpy's setting as it found it; an in-memory analysis has glibc reuse its freed large
+blocks, a spilled one has them returned."""
 
 from __future__ import annotations
 
+import platform
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 import imupipe.analysis.analyze as orchestrator
-from imupipe.pages import _toggle, small_pages
+import imupipe.io.columns as columns
+from imupipe.pages import REUSED_BLOCK_BYTES, _toggle, small_pages
 
 
 def huge_pages_on() -> bool:
@@ -66,3 +71,52 @@ def test_overlapping_analyses_share_the_switch_and_the_last_restores_it() -> Non
         assert huge_pages_on() is True  # numpy's setting from before the first
     finally:
         toggle(saved)
+
+
+REFAULT = """
+import resource, sys
+import numpy as np
+from imupipe import pages
+
+getattr(pages, sys.argv[1])()
+size = int(sys.argv[2])
+with pages.small_pages():  # 4 KiB pages, as in an analysis: one fault per page
+    np.ones(size // 8)  # allocated, touched, freed
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    again = np.ones(size // 8)
+print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+"""
+
+
+def refaults(policy: str, size: int) -> int:
+    """Page faults of filling a ``size``-byte array again after one of that size was freed,
+    in a fresh process under ``policy`` (a function of imupipe.pages)."""
+    run = subprocess.run(
+        [sys.executable, "-c", REFAULT, policy, str(size)], capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    return int(run.stdout)
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="glibc's mallopt")
+def test_freed_column_is_reused_in_memory_and_returned_when_spilled() -> None:
+    column = 35_000_000  # a float64 column of 12 h at 100 Hz
+    pages = column // 4096
+    assert refaults("reuse_freed_memory", column) < pages // 20  # its pages, still resident
+    assert refaults("release_freed_memory", column) > pages * 9 // 10  # fresh pages again
+    # a block beyond what the heap keeps is still mapped and unmapped on its own
+    assert refaults("reuse_freed_memory", REUSED_BLOCK_BYTES + (8 << 20)) > pages
+
+
+def test_each_column_source_sets_its_malloc_policy(
+    tmp_path: Path, small_recordings, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[str] = []
+    monkeypatch.setattr(columns, "reuse_freed_memory", lambda: calls.append("reuse"))
+    monkeypatch.setattr(columns, "release_freed_memory", lambda: calls.append("release"))
+    rec = small_recordings.make("adis", tmp_path / "adis.mcap")
+    small_recordings.run(rec, tmp_path / "in_memory", 1 << 40)
+    assert calls == ["reuse"]
+    calls.clear()
+    small_recordings.run(rec, tmp_path / "spilled", 1)
+    assert calls and set(calls) == {"release"}
