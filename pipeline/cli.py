@@ -294,6 +294,8 @@ def analyze(
     """Analyse a recording: Allan deviation, IEEE 952 terms, effects; write reports."""
     from imupipe.analysis.analyze import AnalyzeOptions
     from imupipe.api import default_out_dir
+    from imupipe.io.columns import spills
+    from imupipe.pages import reuse_freed_memory
     from imupipe.report.datasheet import load_datasheet
 
     if not math.isfinite(memory_budget_gb):
@@ -307,6 +309,9 @@ def analyze(
         [f.value for f in export or []], ExportOptions(combine.value, inflate, export_rate)
     )
     exporting.check()
+    memory_budget = round(memory_budget_gb * 1e9)
+    if not spills(path, memory_budget):  # this process analyses and ends: a kept block no leak
+        reuse_freed_memory()
     options = AnalyzeOptions(
         topic=topic,
         taus_per_decade=taus_per_decade,
@@ -314,7 +319,7 @@ def analyze(
         loop=loop,
         rrd=rrd,
         rrd_full=rrd_full,
-        memory_budget_bytes=round(memory_budget_gb * 1e9),
+        memory_budget_bytes=memory_budget,
         tmp_dir=tmp_dir,
         datasheet=datasheet,
         temperature_topic=temperature_topic,

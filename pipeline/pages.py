@@ -19,11 +19,14 @@ imupipe keeps numpy's behaviour everywhere else.
 Freed arrays: glibc's malloc (``mallopt(3)``) maps each block of at least its mmap threshold
 (dynamic, at most 32 MiB) on its own and unmaps it when freed, so every later array of that
 size faults in and zeroes fresh pages again: the 12 h / 100 Hz analysis (4.32 M samples, 35 MB
-per float64 column) took ~400,000 page faults and 1.0-1.3 s of kernel CPU.  An in-memory
-analysis therefore has the C heap keep and reuse them (:func:`reuse_freed_memory`); a
-spilled one, sized to its memory budget, has them returned at once
-(:func:`release_freed_memory`).  These are the process' settings (glibc has no getter to
-restore them): each analysis sets the one its column source needs.
+per float64 column) took ~400,000 page faults and 1.0-1.3 s of kernel CPU.  The ``imupipe
+analyze`` command, a process that analyses and ends, therefore has the C heap keep and reuse
+them (:func:`reuse_freed_memory`).  A long-lived process does not: kept blocks fragment the
+heap from one analysis to the next (12 analyses of 1 h in one process: RSS 0.53 → 1.17 GB,
+against 0.45 → 0.62 GB with glibc's defaults; ``malloc_trim`` after each gave back less than
+half of it), so the library itself never sets it.  A spilled analysis, sized to its memory
+budget, has freed blocks returned at once (:func:`release_freed_memory`) wherever it runs.
+These are the process' settings; glibc has no getter to restore them.
 """
 
 from __future__ import annotations
@@ -106,8 +109,7 @@ def reuse_freed_memory() -> None:
 
     Measured in fresh processes, the code before and after alternated, the same outputs to the
     byte: 12 h at 100 Hz, page faults 397,000-399,000 → 236,000-267,000 and kernel CPU
-    1.01-1.20 → 0.65-0.85 s, peak RSS 1.02-1.03 → 1.02-1.05 GB; a 1 h unit as a fleet worker
-    analyses it (one thread), 94,000-100,000 → 22,000 faults, 0.27 → 0.11 s of kernel CPU."""
+    1.01-1.20 → 0.65-0.85 s, peak RSS 1.02-1.03 → 1.02-1.05 GB."""
     _mallopt({M_MMAP_THRESHOLD: REUSED_BLOCK_BYTES, M_TRIM_THRESHOLD: KEPT_FREE_BYTES})
 
 

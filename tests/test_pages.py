@@ -1,6 +1,6 @@
 """imupipe.pages: an analysis allocates its large arrays without numpy's huge-page advice, and
-leaves numpy's setting as it found it; an in-memory analysis has glibc reuse its freed large
-blocks, a spilled one has them returned."""
+leaves numpy's setting as it found it; the ``imupipe analyze`` command has glibc reuse freed
+large blocks, a spilled analysis has them returned."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import pytest
 
 import imupipe.analysis.analyze as orchestrator
 import imupipe.io.columns as columns
+from imupipe import pages
 from imupipe.pages import REUSED_BLOCK_BYTES, _toggle, small_pages
 
 
@@ -108,15 +109,20 @@ def test_freed_column_is_reused_in_memory_and_returned_when_spilled() -> None:
     assert refaults("reuse_freed_memory", REUSED_BLOCK_BYTES + (8 << 20)) > pages
 
 
-def test_each_column_source_sets_its_malloc_policy(
-    tmp_path: Path, small_recordings, monkeypatch: pytest.MonkeyPatch
+def test_the_command_reuses_freed_blocks_and_a_spilled_analysis_returns_them(
+    tmp_path: Path, small_recordings, monkeypatch: pytest.MonkeyPatch, cli
 ) -> None:
     calls: list[str] = []
-    monkeypatch.setattr(columns, "reuse_freed_memory", lambda: calls.append("reuse"))
+    monkeypatch.setattr(pages, "reuse_freed_memory", lambda: calls.append("reuse"))
     monkeypatch.setattr(columns, "release_freed_memory", lambda: calls.append("release"))
     rec = small_recordings.make("adis", tmp_path / "adis.mcap")
-    small_recordings.run(rec, tmp_path / "in_memory", 1 << 40)
+    small_recordings.run(rec, tmp_path / "library", 1 << 40)
+    assert calls == []  # the library leaves an in-memory analysis' process as it found it
+    command = ["analyze", str(rec), "-q", "--no-rrd", "--no-loop"]
+    code, _, err = cli([*command, "--out", str(tmp_path / "cmd")])
+    assert code == 0, err
     assert calls == ["reuse"]
     calls.clear()
-    small_recordings.run(rec, tmp_path / "spilled", 1)
-    assert calls and set(calls) == {"release"}
+    code, _, err = cli([*command, "--out", str(tmp_path / "spilled"), "--memory-budget-gb", "1e-9"])
+    assert code == 0, err
+    assert calls and set(calls) == {"release"}  # sized to its budget, wherever it runs

@@ -34,7 +34,7 @@ from mcap.reader import make_reader
 from imupipe.errors import InputError
 from imupipe.io.decode import ImuRecording, ScannedRecording, decode, mcap_files, scan
 from imupipe.io.mcap_scan import chunk_limit
-from imupipe.pages import release_freed_memory, reuse_freed_memory
+from imupipe.pages import release_freed_memory
 from imupipe.progress import StageProgress
 from imupipe.vocab import AXES
 
@@ -73,6 +73,12 @@ def message_count(file: Path) -> int:
 def peak_estimate(files: list[Path]) -> int:
     """Estimated peak bytes of the in-memory analysis of a recording made of ``files``."""
     return PEAK_BYTES_PER_FRAME * sum(message_count(f) for f in files)
+
+
+def spills(path: Path, budget_bytes: int) -> bool:
+    """Whether :func:`open_columns` reads the recording at ``path`` through the spilled source:
+    its estimated in-memory peak (:func:`peak_estimate`) exceeds ``budget_bytes``."""
+    return peak_estimate(mcap_files(Path(path))) > budget_bytes
 
 
 def fill_housekeeping(col: pl.Series) -> np.ndarray | None:
@@ -245,13 +251,12 @@ def open_columns(
     """
     files = mcap_files(Path(path))
     size = sum(f.stat().st_size for f in files)
-    estimate = peak_estimate(files)
     limits = {"max_chunk_bytes": chunk_limit(budget_bytes), "temperature_topic": temperature_topic}
-    if estimate <= budget_bytes:
-        reuse_freed_memory()
+    if not spills(path, budget_bytes):
         with progress.stage("decode", size, "bytes") as advance:
             yield InMemoryColumns(decode(path, topic=topic, progress=advance, **limits))
         return
+    estimate = peak_estimate(files)
     with _spill_directory(tmp_dir, estimate // PEAK_BYTES_PER_FRAME) as folder:
         with progress.stage("decode + spill", size, "bytes") as advance:
             scanned = _spill(path, topic, advance, folder, **limits)
