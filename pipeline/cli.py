@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import gc
 import hashlib
 import math
 import os
@@ -312,6 +313,9 @@ def analyze(
     memory_budget = round(memory_budget_gb * 1e9)
     if not spills(path, memory_budget):  # this process analyses and ends: a kept block no leak
         reuse_freed_memory()
+    # The imports' ~150,000 objects live as long as this process: out of the collector's full
+    # passes (12 h at 100 Hz: 0.22 s in them per analysis in a fresh process, 0.03 s after).
+    gc.freeze()
     options = AnalyzeOptions(
         topic=topic,
         taus_per_decade=taus_per_decade,
