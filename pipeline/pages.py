@@ -87,7 +87,9 @@ REUSED_BLOCK_BYTES = 64 << 20
 """Largest block an in-memory analysis has the heap keep for reuse: a float64 column of
 8.4 M samples (23 h at 100 Hz, 2.3 h at 1 kHz); larger ones are mapped and unmapped."""
 KEPT_FREE_BYTES = 2 * REUSED_BLOCK_BYTES
-"""Free memory the heap keeps at its top (two such blocks) instead of returning it."""
+"""Free memory the heap keeps at its top (two such blocks) instead of returning it; the
+command keeps freed blocks only for a recording whose estimated peak leaves this much of the
+memory budget (measured: the peak RSS grows by 30-70 MB)."""
 
 
 def _mallopt(settings: dict[int, int], trim: bool = False) -> None:

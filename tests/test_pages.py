@@ -125,6 +125,13 @@ def test_the_command_sets_its_process_policies_and_a_spilled_analysis_returns_fr
     assert code == 0, err
     assert calls == ["reuse", "freeze"]  # the imports' objects out of the collector's passes too
     calls.clear()
+    needs = columns.peak_estimate([rec])  # in memory, but no room left for kept blocks
+    code, _, err = cli(
+        [*command, "--out", str(tmp_path / "tight"), "--memory-budget-gb", str(needs / 1e9)]
+    )
+    assert code == 0, err
+    assert calls == ["freeze"]
+    calls.clear()
     code, _, err = cli([*command, "--out", str(tmp_path / "spilled"), "--memory-budget-gb", "1e-9"])
     assert code == 0, err
     assert calls and set(calls) == {"release", "freeze"}  # sized to its budget, wherever it runs
