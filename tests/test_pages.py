@@ -103,11 +103,11 @@ def refaults(policy: str, size: int) -> int:
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="glibc's mallopt")
 def test_freed_column_is_reused_in_memory_and_returned_when_spilled() -> None:
     column = 35_000_000  # a float64 column of 12 h at 100 Hz
-    pages = column // 4096
-    assert refaults("reuse_freed_memory", column) < pages // 20  # its pages, still resident
-    assert refaults("release_freed_memory", column) > pages * 9 // 10  # fresh pages again
+    page_count = column // 4096
+    assert refaults("reuse_freed_memory", column) < page_count // 20  # still resident
+    assert refaults("release_freed_memory", column) > page_count * 9 // 10  # fresh pages again
     # a block beyond what the heap keeps is still mapped and unmapped on its own
-    assert refaults("reuse_freed_memory", REUSED_BLOCK_BYTES + (8 << 20)) > pages
+    assert refaults("reuse_freed_memory", REUSED_BLOCK_BYTES + (8 << 20)) > page_count
 
 
 def test_the_command_sets_its_process_policies_and_a_spilled_analysis_returns_freed_blocks(
