@@ -60,6 +60,31 @@ def test_analysis_runs_on_small_pages(
     assert huge_pages_on() is before
 
 
+def test_decode_runs_on_small_pages(
+    tmp_path: Path, small_recordings, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import imupipe.io.decode as dec
+
+    seen: list[tuple[str, bool]] = []
+
+    def spy(name: str):
+        original = getattr(dec, name)
+
+        def spied(*args, **kwargs):
+            seen.append((name, huge_pages_on()))
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(dec, name, spied)
+
+    spy("scan")
+    spy("_adis_frame")  # where the counts become 35 MB SI columns at 12 h / 100 Hz
+    rec = small_recordings.make("adis", tmp_path / "adis.mcap")
+    before = huge_pages_on()
+    assert dec.decode(rec).frames.height == small_recordings.frames
+    assert seen == [("scan", False), ("_adis_frame", False)]
+    assert huge_pages_on() is before
+
+
 def test_overlapping_analyses_share_the_switch_and_the_last_restores_it() -> None:
     toggle = _toggle()
     saved = toggle(True)
