@@ -295,8 +295,6 @@ def analyze(
     """Analyse a recording: Allan deviation, IEEE 952 terms, effects; write reports."""
     from imupipe.analysis.analyze import AnalyzeOptions
     from imupipe.api import default_out_dir
-    from imupipe.io.columns import spills
-    from imupipe.pages import KEPT_FREE_BYTES, reuse_freed_memory
     from imupipe.report.datasheet import load_datasheet
 
     if not math.isfinite(memory_budget_gb):
@@ -310,10 +308,6 @@ def analyze(
         [f.value for f in export or []], ExportOptions(combine.value, inflate, export_rate)
     )
     exporting.check()
-    memory_budget = round(memory_budget_gb * 1e9)
-    # this process analyses and ends: a block kept for reuse is no leak, if the budget has room
-    if not spills(path, memory_budget - KEPT_FREE_BYTES):
-        reuse_freed_memory()
     # The imports' ~150,000 objects live as long as this process: out of the collector's full
     # passes (12 h at 100 Hz: 0.22 s in them per analysis in a fresh process, 0.03 s after).
     gc.freeze()
@@ -324,7 +318,7 @@ def analyze(
         loop=loop,
         rrd=rrd,
         rrd_full=rrd_full,
-        memory_budget_bytes=memory_budget,
+        memory_budget_bytes=round(memory_budget_gb * 1e9),
         tmp_dir=tmp_dir,
         datasheet=datasheet,
         temperature_topic=temperature_topic,

@@ -65,7 +65,7 @@ import sys
 from pathlib import Path
 import polars as pl
 import imupipe.io.decode as dec
-from imupipe.pages import release_freed_memory
+from imupipe.io.columns import release_freed_memory
 
 def status(key):
     with open("/proc/self/status") as f:
