@@ -24,6 +24,7 @@ For each (axis, term) over the units whose term is resolved:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -80,11 +81,13 @@ def howe_k(n: int, coverage: float = COVERAGE, confidence: float = CONFIDENCE) -
     return float(math.sqrt((n - 1) * (1 + 1 / n) * z * z / chi2))
 
 
+@functools.cache
 def order_statistic_rank(
     n: int, coverage: float = COVERAGE, confidence: float = CONFIDENCE
 ) -> int | None:
     """Largest r with P(coverage of (X₍ᵣ₎, X₍ₙ₊₁₋ᵣ₎) ≥ ``coverage``) ≥ ``confidence``, or None
-    when even the extremes (r = 1) are not enough (n < 93 at 95 %/95 %)."""
+    when even the extremes (r = 1) are not enough (n < 93 at 95 %/95 %).  Computed once per
+    n (n/2 Beta tail probabilities: ~1 ms at n = 1000)."""
     r = np.arange(1, n // 2 + 1)
     conf = stats.beta.sf(coverage, n + 1 - 2 * r, 2 * r)
     ok = r[conf >= confidence]
@@ -116,17 +119,47 @@ def _interval(u: UnitTerm) -> tuple[float, float] | None:
     return lo, hi
 
 
+def _without_each(x: np.ndarray) -> np.ndarray:
+    """``(n, 2)``: row j is the tolerance interval of the sorted values ``x`` without
+    ``x[j]`` (n ≥ 3).  With order statistics (n − 1 ≥ 93) the k-th of the others is
+    ``x[k]`` below j and ``x[k + 1]`` from j on, so all n intervals cost O(n) after the sort,
+    not n sorts: a fleet of 1,000 units spent 12.6 s of its report here, and 10,000 would
+    have spent ~20 min.  Below 93 units each is Howe's interval of the others (at most 92
+    values each)."""
+    n = x.size
+    r = order_statistic_rank(n - 1)
+    if r is None:
+        return np.array([tolerance_interval(np.delete(x, j))[0] for j in range(n)])
+    j = np.arange(n)
+    lo, hi = r - 1, n - 1 - r  # the others' order statistics X(r), X(n - r), 0-based
+    return np.column_stack((np.where(j > lo, x[lo], x[lo + 1]), np.where(j > hi, x[hi], x[hi + 1])))
+
+
 def outlier_units(units: Sequence[UnitTerm]) -> tuple[str, ...]:
-    """Units whose 95 % interval misses the others' tolerance interval (module doc)."""
-    out = []
+    """Units whose 95 % interval misses the others' tolerance interval (module doc): the
+    resolved others of a resolved unit are all the resolved units but itself, those of an
+    unresolved one all of them."""
     resolved = [u for u in units if u.value is not None]
+    n = len(resolved)
+    if n < MIN_OTHERS_FOR_OUTLIER:
+        return ()
+    values = np.array([u.value for u in resolved], dtype=float)
+    order = np.argsort(values, kind="stable")
+    sorted_at = dict(zip((resolved[k].unit for k in order), range(n), strict=True))
+    without = _without_each(values[order]) if n > MIN_OTHERS_FOR_OUTLIER else None
+    everyone = tolerance_interval(values)
+    out = []
     for u in units:
         mine = _interval(u)
-        others = [o.value for o in resolved if o.unit != u.unit]
-        if mine is None or len(others) < MIN_OTHERS_FOR_OUTLIER:
+        if mine is None:
             continue
-        ti = tolerance_interval(others)
-        if ti is not None and (mine[1] < ti[0][0] or mine[0] > ti[0][1]):
+        if u.value is None:
+            ti = everyone[0]
+        elif without is None:  # only n - 1 others
+            continue
+        else:
+            ti = without[sorted_at[u.unit]]
+        if mine[1] < ti[0] or mine[0] > ti[1]:
             out.append(u.unit)
     return tuple(out)
 

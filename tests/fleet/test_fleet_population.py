@@ -18,8 +18,10 @@ from imupipe.fleet.population import (
     HOWE_METHOD,
     ORDER_METHOD,
     UnitTerm,
+    _without_each,
     howe_k,
     order_statistic_rank,
+    outlier_units,
     population,
     term_stats,
     tolerance_interval,
@@ -98,6 +100,53 @@ def test_an_outlier_needs_three_other_units():
     assert term_stats("gyro_x", "random_walk", "u", two).outliers == ()
     three = [*_units([1.0, 1.1, 1.05]), far]
     assert term_stats("gyro_x", "random_walk", "u", three).outliers == ("far",)
+
+
+def _outliers_by_definition(units):
+    """The module's definition, one tolerance interval of the others per unit."""
+    out = []
+    for u in units:
+        others = [o.value for o in units if o.value is not None and o.unit != u.unit]
+        mine = (0.0, u.hi) if u.value is None and u.hi is not None else (u.lo, u.hi)
+        if (u.value is None and u.hi is None) or len(others) < 3:
+            continue
+        (lo, hi), _ = tolerance_interval(others)
+        if mine[1] < lo or mine[0] > hi:
+            out.append(u.unit)
+    return tuple(out)
+
+
+@pytest.mark.parametrize("n", [3, 4, 5, 40, 93, 94, 95, 150, 400])
+def test_leave_one_out_outliers_equal_the_definition_at_every_fleet_size(n):
+    # the others' order statistics are read off the sorted population instead of sorting it
+    # again for every unit: the same units whatever the size (Howe below 94, Wilks above),
+    # with ties, unresolved units (with and without a bound) and narrow intervals at the tails
+    rng = np.random.default_rng(n)
+    values = np.round(1e-3 * np.exp(rng.normal(0, 0.3, n)), 5)  # rounding makes ties
+    rel = rng.choice([0.001, 0.02, 0.3], n)
+    units = [
+        UnitTerm(f"u{i}", v, v * (1 - r), v * (1 + r))
+        for i, (v, r) in enumerate(zip(values, rel, strict=True))
+    ]
+    units[1] = UnitTerm("u1", None, None, 1e-4)  # unresolved, its bound under everyone
+    units[2] = UnitTerm("u2", None, None, None)
+    units.append(UnitTerm("hot", 9e-3, 8.9e-3, 9.1e-3))
+    expected = _outliers_by_definition(units)
+    assert outlier_units(units) == expected
+    if n >= 40:
+        assert "hot" in expected and "u1" in expected  # the test sees both kinds of outlier
+    if n >= 150:  # the extremes of a wide population, inside the others' interval or not
+        assert len(expected) >= 3
+    x = np.sort(values)  # and every interval itself, not only the decisions it makes
+    each = [list(tolerance_interval(np.delete(x, j))[0]) for j in range(n)]
+    assert _without_each(x).tolist() == each
+
+
+def test_the_rank_is_computed_once_per_population_size():
+    order_statistic_rank.cache_clear()
+    units = _units(list(np.linspace(1.0, 2.0, 300)))
+    outlier_units(units)
+    assert order_statistic_rank.cache_info().misses == 2  # n = 300 (unresolved) and 299
 
 
 def _sheet(tmp_path, body):
