@@ -230,8 +230,8 @@ def test_discover_files_bags_folders_globs(tmp_path):
     # the bag once (not its split file), the nested a.mcap, the top a.mcap once (glob + file)
     assert [(r.name, r.is_dir, r.local) for r in recs] == [
         ("robot_7", True, True),
-        ("a", False, True),
-        ("a-2", False, True),
+        ("site_a", False, True),  # two a.mcap: told apart by their folders
+        (f"{tmp_path.name}_a", False, True),
     ]
     assert recs[0].location == str(bag)
     with pytest.raises(FleetError, match="no recording"):
@@ -242,10 +242,27 @@ def test_discover_files_bags_folders_globs(tmp_path):
 
 def test_unit_names_are_safe_and_unique():
     assert unique_names(["/x/../a b.mcap", "/y/a b.mcap", "/z/a_b-2.mcap", "/w/.hidden"]) == [
-        "a_b",
+        "x_a_b",
+        "y_a_b",
         "a_b-2",
-        "a_b-2-2",
         "hidden",
+    ]
+
+
+def test_recordings_named_alike_are_told_apart_by_their_folders():
+    # one calibration bag per robot and week (files or rosbag2 folders): the unit names say
+    # which robot, with as few folders as it takes, and stay unique for a fleet of any size
+    bags = [f"fleet/robot-{i}/calib.mcap" for i in range(1000)]
+    assert unique_names(bags)[:2] == ["robot-0_calib", "robot-1_calib"]
+    assert len(set(unique_names(bags))) == 1000
+    weeks = ["b/robot-1/w48", "b/robot-2/w48", "b/robot-1/w49", "b/x/robot-1/w48"]
+    assert unique_names(weeks) == ["b_robot-1_w48", "robot-2_w48", "w49", "x_robot-1_w48"]
+    # the same path twice (two file systems), and a name made equal to another one
+    assert unique_names(["a/u.mcap", "a/u.mcap", "a/b/u.mcap", "a_u.mcap"]) == [
+        "a_u",
+        "a_u-2",
+        "b_u",
+        "a_u-3",
     ]
 
 
