@@ -37,6 +37,15 @@ STRIP_TERMS: tuple[tuple[str, str], ...] = (
 
 _MARGINS = {"left": 0.07, "right": 0.99, "bottom": 0.12, "top": 0.86, "wspace": 0.28}
 """Fixed margins of the one-row figures: a layout engine costs an extra draw of every tick."""
+SHOWN_OPAQUE = 30
+"""Units drawn fully opaque (curves at 0.7); a larger fleet's units fade as 1/n, so that a
+thousand overlapping curves or intervals do not become one black mass over the population's
+median and band (whose edges are drawn on top)."""
+
+
+def _unit_alpha(units: int, opaque: float = 1.0) -> float:
+    """Opacity of each unit's curve or interval in a fleet of ``units`` (:data:`SHOWN_OPAQUE`)."""
+    return opaque * min(1.0, SHOWN_OPAQUE / max(units, 1))
 
 
 def _png(fig: Figure) -> bytes:
@@ -56,16 +65,20 @@ def adev_figure(fleet: pl.DataFrame, pop: pl.DataFrame, sensor: str) -> bytes | 
     fig, panels = plt.subplots(
         1, len(axes), figsize=(4.2 * len(axes), 4.2), squeeze=False, gridspec_kw=_MARGINS
     )
+    units = fleet[UNIT_COLUMN].n_unique()
     for ax, axis in zip(panels[0], axes, strict=True):
         part = fleet.filter(pl.col("axis") == axis)
         curves = [
             np.column_stack([unit["tau"], unit["adev"]])
             for _, unit in part.group_by(UNIT_COLUMN, maintain_order=True)
         ]  # one artist for all units: a line each costs ~0.1 s per unit to lay out and draw
-        ax.add_collection(LineCollection(curves, colors="0.55", linewidths=0.7, alpha=0.7))
+        alpha = _unit_alpha(units, 0.7)
+        ax.add_collection(LineCollection(curves, colors="0.45", linewidths=0.7, alpha=alpha))
         p = pop.filter(pl.col("axis") == axis)
         ax.fill_between(p["tau"], p["lo"], p["hi"], color="tab:blue", alpha=0.25, lw=0)
-        ax.plot(p["tau"], p["median"], color="tab:blue", lw=2.0)
+        for edge in ("lo", "hi"):
+            ax.plot(p["tau"], p[edge], color="tab:blue", lw=0.8, zorder=3)
+        ax.plot(p["tau"], p["median"], color="tab:blue", lw=2.0, zorder=3)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.autoscale_view()
@@ -75,11 +88,10 @@ def adev_figure(fleet: pl.DataFrame, pop: pl.DataFrame, sensor: str) -> bytes | 
         sparse_log_ticks(ax.xaxis, ax.yaxis)
     unit = fleet.filter(pl.col("axis") == axes[0])["unit"][0]
     panels[0][0].set_ylabel(f"Allan deviation σ(τ) [{unit}]")
-    panels[0][0].plot([], [], color="0.55", lw=0.7, label="each unit")
+    panels[0][0].plot([], [], color="0.45", lw=0.7, label="each unit")
     panels[0][0].plot([], [], color="tab:blue", lw=2.0, label="population median")
     panels[0][0].fill_between([], [], [], color="tab:blue", alpha=0.25, label="95 % of units")
     panels[0][0].legend(fontsize=7)
-    units = fleet[UNIT_COLUMN].n_unique()
     fig.suptitle(f"{SENSOR_TITLES[sensor]}: Allan deviation of {units} units")
     return _png(fig)
 
@@ -106,6 +118,7 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
             if st is not None and st.tolerance is not None:
                 lo, hi = (from_si(v, unit) for v in st.tolerance)
                 ax.fill_between([i - 0.4, i + 0.4], lo, hi, color="tab:blue", alpha=0.15, lw=0)
+                ax.hlines([lo, hi], i - 0.4, i + 0.4, "tab:blue", lw=0.8, zorder=3)
             if st is not None and st.datasheet is not None:
                 ax.hlines(from_si(st.datasheet.si(), unit), i - 0.45, i + 0.45, "tab:red", "--")
             for off, name in zip(offsets, names, strict=True):
@@ -128,10 +141,11 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
                 ax.errorbar(
                     x, v, yerr=[below, above], fmt="o", ms=3.5, capsize=2,
                     color="tab:orange" if outlier else "k",
+                    alpha=1.0 if outlier else _unit_alpha(len(names)), zorder=4 if outlier else 2,
                 )  # fmt: skip
         if bounds:
             x, v = np.array(bounds).T
-            ax.plot(x, v, "v", color="0.5", ms=4, ls="none")
+            ax.plot(x, v, "v", color="0.5", ms=4, ls="none", alpha=_unit_alpha(len(names)))
         ax.set_xticks(range(len(axes)), axes)
         ax.set_yscale("log")  # spans about a decade: matplotlib's minor ticks label it
         log_labels(ax.yaxis)

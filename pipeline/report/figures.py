@@ -82,11 +82,16 @@ class PowerOfTenLabels(LogFormatter):
     decades, and minor ticks when the view spans few decades)."""
 
     def _num_to_string(self, x: float, vmin: float, vmax: float) -> str:
+        """The coefficient to 3 significant digits: a view narrower than a decade (a fleet's N
+        spread over ±10 %) gets minor ticks at 4.6, 4.8… ×10⁻², which must not all read
+        ``5×10⁻²``."""
         fx = math.log10(x)
         exponent = round(fx) if abs(fx - round(fx)) < 1e-10 else math.floor(fx)
-        coeff = round(10 ** (fx - exponent))
+        coeff = float(f"{10 ** (fx - exponent):.3g}")
+        if coeff >= 10:  # 9.9996… rounds up to the next decade
+            coeff, exponent = coeff / 10, exponent + 1
         power = "10" + str(exponent).translate(_SUPERSCRIPT)
-        return power if coeff == 1 else f"{coeff}×{power}"
+        return power if coeff == 1 else f"{coeff:g}×{power}"
 
 
 def log_labels(*axes: Axis) -> None:

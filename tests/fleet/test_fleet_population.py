@@ -321,6 +321,33 @@ def test_population_curve_is_the_median_and_band_of_the_units():
     assert pop["tau"].max() == pytest.approx(1000.0) and pop["units"][-1] == 1
 
 
+def test_a_large_fleets_units_fade_and_its_outliers_and_tolerance_stay_on_top(monkeypatch):
+    # 300 units' intervals drawn opaque are one black mass over the tolerance band
+    from imupipe.fleet import figures
+    from imupipe.vocab import TERM_NAMES
+
+    drawn = []
+    monkeypatch.setattr(figures, "_png", lambda fig: drawn.append(fig) or b"")
+    rng = np.random.default_rng(3)
+
+    def report(n):
+        terms = {t: {"value": n, "lo": 0.99 * n, "hi": 1.01 * n, "unit": "u"} for t in TERM_NAMES}
+        return {"axes": {"gyro_x": {"ieee952": terms}}}
+
+    reports = {f"u{i}": report(float(v)) for i, v in enumerate(rng.lognormal(0, 0.05, 300))}
+    reports["hot"] = report(2.0)
+    figures.terms_figure(reports, population(reports), "gyro")
+    panel = drawn[0].axes[0]  # N
+    lines = [ln for ln in panel.lines if len(ln.get_xdata()) > 0]
+    units, hot = (next(ln for ln in lines if ln.get_color() == c) for c in ("k", "tab:orange"))
+    assert units.get_alpha() == pytest.approx(30 / 301)
+    assert len(units.get_xdata()) + len(hot.get_xdata()) == 301  # "hot" and the tails' few
+    assert hot.get_alpha() == 1.0 and hot.get_zorder() > units.get_zorder()
+    edges = [c for c in panel.collections if c.get_zorder() == 3]
+    assert len(edges) == 1 and len(edges[0].get_segments()) == 2  # the tolerance's lo and hi
+    assert figures._unit_alpha(24) == 1.0
+
+
 def test_worker_memory_caps_the_analysis_budget():
     options = AnalyzeOptions(memory_budget_bytes=2_000_000_000)
     assert budget_for_worker(options, None) == AnalyzeOptions(workers=1)  # a worker is one core

@@ -23,6 +23,9 @@ from imupipe.report import figures
         (300.0, "3×10²"),
         (1e-10, "10⁻¹⁰"),
         (0.1, "10⁻¹"),
+        (0.046, "4.6×10⁻²"),
+        (5.25e-2, "5.25×10⁻²"),
+        (9.9996e-4, "10⁻³"),
     ],
 )
 def test_power_of_ten_labels(value: float, label: str) -> None:
@@ -58,3 +61,20 @@ def test_labels_of_a_narrow_log_view_name_its_minor_ticks() -> None:
     finally:
         plt.close(fig)
     assert "2×10⁻⁴" in labels and "4×10⁻⁴" in labels
+
+
+def test_a_view_narrower_than_a_decade_has_distinct_labels() -> None:
+    """A fleet's N within ±10 % of 5×10⁻²: matplotlib puts minor ticks at 4.4, 4.6, … ×10⁻²."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    try:
+        ax.plot([0, 1], [4.55e-2, 5.45e-2])
+        ax.set_yscale("log")
+        figures.log_labels(ax.yaxis)
+        fig.canvas.draw()
+        labels = [t.get_text() for t in ax.yaxis.get_ticklabels(minor=True) if t.get_text()]
+    finally:
+        plt.close(fig)
+    assert len(labels) >= 3 and len(set(labels)) == len(labels)
+    assert "4.6×10⁻²" in labels and "5×10⁻²" in labels
