@@ -2,8 +2,11 @@
 
 One 2-D view per axis at (log10 τ, −log10 σ), the convention of
 :mod:`imupipe.report.rerun_view` (Rerun has no log axes; 2-D views point y down): each unit's
-curve under ``allan/<axis>/units/<unit>`` (labelled with the unit's name) and the population
-median and 95 % band edges under ``allan/<axis>/population``, with labelled decade grid lines.
+curve under ``allan/<axis>/units/<unit>`` and the population median and 95 % band edges under
+``allan/<axis>/population``, with labelled decade grid lines.  Rerun draws a strip's label at
+its middle, where every unit's curve passes: the units' labels piled up there over the
+median's, so a unit is named by its entity path (shown on hover and in the streams panel),
+and the population's lines are labelled at their long-τ end, where the band is widest.
 """
 
 from __future__ import annotations
@@ -37,22 +40,30 @@ def _log_axis(rec: rr.RecordingStream, axis: str, fleet: pl.DataFrame, pop: pl.D
                 [_strip(x, y)],
                 colors=UNIT_COLOR,
                 radii=rr.Radius.ui_points(1.0),
-                labels=str(name),
                 draw_order=1,
             ),
             static=True,
         )
     x = _log10(pop["tau"].to_numpy())
-    for name, color, width in (("median", MEDIAN_COLOR, 2.5), ("lo", BAND_COLOR, 1.5),
-                               ("hi", BAND_COLOR, 1.5)):  # fmt: skip
+    for name, color, width, label in (
+        ("median", MEDIAN_COLOR, 2.5, "population median"),
+        ("lo", BAND_COLOR, 1.5, "2.5 % of units below"),
+        ("hi", BAND_COLOR, 1.5, "2.5 % of units above"),
+    ):
+        strip = _strip(x, _log10(pop[name].to_numpy()))
         rec.log(
             f"{base}/population/{name}",
-            rr.LineStrips2D(
-                [_strip(x, _log10(pop[name].to_numpy()))],
+            rr.LineStrips2D([strip], colors=color, radii=rr.Radius.ui_points(width), draw_order=2),
+            static=True,
+        )  # labelled at its long-τ end, where the band is widest: at the middle they overlap
+        rec.log(
+            f"{base}/population/{name}/label",
+            rr.Points2D(
+                strip[-1:],
                 colors=color,
                 radii=rr.Radius.ui_points(width),
-                labels=f"population {name}" if name == "median" else f"95 % band {name}",
-                draw_order=2,
+                labels=label,
+                draw_order=3,
             ),
             static=True,
         )

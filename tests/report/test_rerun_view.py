@@ -226,3 +226,35 @@ def test_analyze_writes_an_envelope_unless_rrd_full(
     assert app(args, standalone_mode=False) in (None, 0)
     chunks = rrd_chunks.rows(out / "recording.rrd")
     assert {chunks[f"/signals/{g}"] for g in ("gyro", "accel", "temperature", "supply")} == {rows}
+
+
+def test_fleet_view_names_units_by_path_and_labels_the_band_where_it_is_widest() -> None:
+    """fleet.rrd: a unit's label drawn at its curve's middle piled up over the median's."""
+    from imupipe.analysis.results import ALLAN_SCHEMA
+    from imupipe.fleet import rerun_view as fleet_view
+    from imupipe.fleet.curves import fleet_frame, population_curves
+
+    tau = np.geomspace(0.01, 1000.0, 11)
+    curve = pl.DataFrame(
+        {"axis": "gyro_x", "unit": "rad/s", "tau": tau, "adev": 1e-3 / np.sqrt(tau),
+         "lo": np.nan, "hi": np.nan, "edf": 1.0, "terms": 1, "alpha": 0.0, "adev_after": np.nan,
+         "model_before": np.nan, "model_after": np.nan, "z_before": np.nan, "z_after": np.nan},
+        schema=ALLAN_SCHEMA,
+    )  # fmt: skip
+    fleet = fleet_frame(
+        {f"u{k}": curve.with_columns(pl.col("adev") * (1 + k / 10)) for k in range(5)}
+    )
+    pop = population_curves(fleet)
+    rec = _KeepLogs()
+    fleet_view._log_axis(rec, "gyro_x", fleet, pop)
+    units = [p for p in rec.logged if p.startswith("allan/gyro_x/units/")]
+    assert units == [f"allan/gyro_x/units/u{k}" for k in range(5)]
+    assert not any(rec.logged[p].labels for p in units)
+    labels = {p: _labels(a)[0] for p, a in rec.logged.items() if p.endswith("/label")}
+    assert labels == {
+        "allan/gyro_x/population/median/label": "population median",
+        "allan/gyro_x/population/lo/label": "2.5 % of units below",
+        "allan/gyro_x/population/hi/label": "2.5 % of units above",
+    }
+    at = rec.logged["allan/gyro_x/population/hi/label"].positions.as_arrow_array().to_pylist()
+    assert at[0] == pytest.approx([3.0, -np.log10(pop["hi"][-1])])  # log10 τ = 3, y down
