@@ -43,6 +43,12 @@ thousand overlapping curves or intervals do not become one black mass over the p
 median and band (whose edges are drawn on top)."""
 
 
+VIEW_MARGIN = 1.3
+"""A strip plot's view spans its units' intervals, bounds and datasheet values, × / ÷ this: not
+the tolerance interval, which from two or three units (Howe's k = 37.7 or 9.9 on log values)
+spans up to 18 decades and flattened every unit into one line at the panel's middle."""
+
+
 def _unit_alpha(units: int, opaque: float = 1.0) -> float:
     """Opacity of each unit's curve or interval in a fleet of ``units`` (:data:`SHOWN_OPAQUE`)."""
     return opaque * min(1.0, SHOWN_OPAQUE / max(units, 1))
@@ -113,6 +119,7 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
         # one artist per kind of point and panel: an errorbar per unit costs seconds to lay out
         points: dict[bool, list[tuple[float, float, float, float]]] = {False: [], True: []}
         bounds: list[tuple[float, float]] = []
+        extent: list[float] = []  # what the view must hold (VIEW_MARGIN)
         for i, axis in enumerate(axes):
             st = by_key.get((axis, term))
             if st is not None and st.tolerance is not None:
@@ -120,7 +127,9 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
                 ax.fill_between([i - 0.4, i + 0.4], lo, hi, color="tab:blue", alpha=0.15, lw=0)
                 ax.hlines([lo, hi], i - 0.4, i + 0.4, "tab:blue", lw=0.8, zorder=3)
             if st is not None and st.datasheet is not None:
-                ax.hlines(from_si(st.datasheet.si(), unit), i - 0.45, i + 0.45, "tab:red", "--")
+                sheet = from_si(st.datasheet.si(), unit)
+                ax.hlines(sheet, i - 0.45, i + 0.45, "tab:red", "--")
+                extent.append(sheet)
             for off, name in zip(offsets, names, strict=True):
                 doc = reports[name]["axes"].get(axis)
                 if doc is None:
@@ -133,8 +142,10 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
                     hi = from_si(t["hi"] if t["hi"] is not None else t["value"], unit)
                     outlier = st is not None and name in st.outliers
                     points[outlier].append((x, v, v - lo, hi - v))
+                    extent += [lo, hi]
                 elif t["hi"] is not None:  # unresolved: its upper bound
                     bounds.append((x, from_si(t["hi"], unit)))
+                    extent.append(bounds[-1][1])
         for outlier, rows in points.items():
             if rows:
                 x, v, below, above = np.array(rows).T
@@ -148,6 +159,9 @@ def terms_figure(reports: Mapping[str, dict], stats: list[TermStats], sensor: st
             ax.plot(x, v, "v", color="0.5", ms=4, ls="none", alpha=_unit_alpha(len(names)))
         ax.set_xticks(range(len(axes)), axes)
         ax.set_yscale("log")  # spans about a decade: matplotlib's minor ticks label it
+        positive = [y for y in extent if y > 0]
+        if positive:
+            ax.set_ylim(min(positive) / VIEW_MARGIN, max(positive) * VIEW_MARGIN)
         log_labels(ax.yaxis)
         ax.set_title(f"{symbol} [{unit}]")
         ax.grid(True, axis="y", which="major", lw=0.4, alpha=0.6)

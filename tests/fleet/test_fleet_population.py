@@ -348,6 +348,28 @@ def test_a_large_fleets_units_fade_and_its_outliers_and_tolerance_stay_on_top(mo
     assert figures._unit_alpha(24) == 1.0
 
 
+def test_a_strip_plot_shows_its_units_not_a_tolerance_interval_of_two(monkeypatch):
+    # Howe's interval of two units spans ~18 decades here: the view follows the units
+    from imupipe.fleet import figures
+    from imupipe.vocab import TERM_NAMES
+
+    drawn = []
+    monkeypatch.setattr(figures, "_png", lambda fig: drawn.append(fig) or b"")
+
+    def report(n):
+        terms = {t: {"value": n, "lo": 0.9 * n, "hi": 1.1 * n, "unit": "u"} for t in TERM_NAMES}
+        return {"axes": {"gyro_x": {"ieee952": terms}}}
+
+    reports = {"a": report(1e-5), "b": report(2e-5)}
+    stats = population(reports)
+    (ti,) = [st.tolerance for st in stats if st.term == "random_walk"]
+    assert ti[1] / ti[0] > 1e6
+    figures.terms_figure(reports, stats, "gyro")
+    lo, hi = drawn[0].axes[0].get_ylim()
+    unit = 180 / math.pi  # rad → ° (the paper's unit)
+    assert lo == pytest.approx(0.9e-5 * unit / 1.3) and hi == pytest.approx(2.2e-5 * unit * 1.3)
+
+
 def test_worker_memory_caps_the_analysis_budget():
     options = AnalyzeOptions(memory_budget_bytes=2_000_000_000)
     assert budget_for_worker(options, None) == AnalyzeOptions(workers=1)  # a worker is one core
