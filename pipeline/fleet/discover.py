@@ -25,6 +25,9 @@ from imupipe.errors import FleetError
 ROSBAG2_METADATA = "metadata.yaml"
 _GLOB_CHARS = re.compile(r"[*?\[]")
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
+MAX_NAME = 120
+"""Longest unit name made of a recording's folders (a file name may have 255 bytes, and the
+unit's folder is also staged as ``<name>-<32 hex digits>``)."""
 
 
 @dataclass(frozen=True)
@@ -100,23 +103,37 @@ def unique_names(paths: Iterable[str]) -> list[str]:
     (:func:`_name_parts`).  Recordings whose names collide are told apart by as many of their
     folders as it takes — one calibration bag per robot, ``robot-7/calib.mcap`` and
     ``robot-8/calib.mcap``, gives ``robot-7_calib`` and ``robot-8_calib`` — and names still
-    repeated after that (a path named twice over two file systems) get ``-2``, ``-3``...
+    alike after that (a path named twice over two file systems, or recordings whose folders
+    differ only where the name would grow longer than :data:`MAX_NAME`) keep their own name,
+    numbered ``-2``, ``-3``...
 
     Linear in the recordings: numbering every repeat by scanning the names so far was cubic in
     them (1,000 bags named alike took 1.8 s; 10,000 would have taken about half an hour)."""
     parts = [_name_parts(path) for path in paths]
     depth = [1] * len(parts)
+
+    def joined(i: int, d: int) -> str:
+        return "_".join(parts[i][:d][::-1])
+
     while True:
-        names = ["_".join(p[:d][::-1]) for p, d in zip(parts, depth, strict=True)]
+        names = [joined(i, d) for i, d in enumerate(depth)]
         holders: dict[str, list[int]] = {}
         for i, name in enumerate(names):
             holders.setdefault(name, []).append(i)
         longer = [i for held in holders.values() if len(held) > 1 for i in held]
-        longer = [i for i in longer if depth[i] < len(parts[i])]
+        longer = [
+            i
+            for i in longer
+            if depth[i] < len(parts[i]) and len(joined(i, depth[i] + 1)) <= MAX_NAME
+        ]
         if not longer:
             break
         for i in longer:
             depth[i] += 1
+    for held in holders.values():  # folders did not tell these apart: their own names, numbered
+        if len(held) > 1:
+            for i in held:
+                names[i] = parts[i][0]
     taken: set[str] = set()
     repeats: dict[str, int] = {}
     out = []

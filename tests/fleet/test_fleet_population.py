@@ -13,7 +13,7 @@ from imupipe.analysis.analyze import AnalyzeOptions
 from imupipe.analysis.results import ALLAN_SCHEMA
 from imupipe.errors import DatasheetError, FleetError
 from imupipe.fleet.curves import fleet_frame, population_curves
-from imupipe.fleet.discover import discover, unique_names
+from imupipe.fleet.discover import MAX_NAME, discover, unique_names
 from imupipe.fleet.population import (
     HOWE_METHOD,
     ORDER_METHOD,
@@ -257,12 +257,17 @@ def test_recordings_named_alike_are_told_apart_by_their_folders():
     assert len(set(unique_names(bags))) == 1000
     weeks = ["b/robot-1/w48", "b/robot-2/w48", "b/robot-1/w49", "b/x/robot-1/w48"]
     assert unique_names(weeks) == ["b_robot-1_w48", "robot-2_w48", "w49", "x_robot-1_w48"]
+    # folders that would make a name too long for a file system are not used
+    deep = "/".join(f"level-{k:03d}" for k in range(40))
+    long_ones = unique_names([f"site-a/{deep}/calib.mcap", f"site-b/{deep}/calib.mcap"])
+    assert long_ones == ["calib", "calib-2"]
+    assert len(unique_names([f"{deep}/{k}/calib.mcap" for k in "ab"])[0]) <= MAX_NAME
     # the same path twice (two file systems), and a name made equal to another one
     assert unique_names(["a/u.mcap", "a/u.mcap", "a/b/u.mcap", "a_u.mcap"]) == [
-        "a_u",
-        "a_u-2",
+        "u",
+        "u-2",
         "b_u",
-        "a_u-3",
+        "a_u",
     ]
 
 
