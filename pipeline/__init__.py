@@ -10,6 +10,7 @@ The public API (imported on first use, so that ``imupipe.errors`` stays light)::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
@@ -39,10 +40,19 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    """PEP 562: load the public names on first access (numba, polars... only when used)."""
-    if name in _LAZY:
-        import importlib
+def lazy_names(package: str, module_of: dict[str, str]) -> Callable[[str], Any]:
+    """A package's ``__getattr__`` (PEP 562) that loads each name of ``module_of`` (name →
+    module) on first access, so that importing the package, or one of its submodules, does
+    not import what its names need (numba, polars, rerun-sdk...)."""
 
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'imupipe' has no attribute {name!r}")
+    def load(name: str) -> Any:
+        if name in module_of:
+            import importlib
+
+            return getattr(importlib.import_module(module_of[name]), name)
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+
+    return load
+
+
+__getattr__ = lazy_names("imupipe", _LAZY)

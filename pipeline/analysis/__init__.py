@@ -7,7 +7,9 @@ scipy) with it."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from imupipe import lazy_names
 
 if TYPE_CHECKING:
     from imupipe.analysis.analyze import AnalyzeOptions
@@ -23,19 +25,14 @@ __all__ = [
     "InputSummary",
 ]
 
-_MODULE_OF = {
-    "AnalyzeOptions": "analyze",
-    "ConditionedSeries": "condition",
-    "ALLAN_SCHEMA": "results",
-    "AnalysisResult": "results",
-    "AxisResult": "results",
-    "InputSummary": "results",
-}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _MODULE_OF:
-        import importlib
-
-        return getattr(importlib.import_module(f"imupipe.analysis.{_MODULE_OF[name]}"), name)
-    raise AttributeError(f"module 'imupipe.analysis' has no attribute {name!r}")
+__getattr__ = lazy_names(
+    "imupipe.analysis",
+    {
+        "AnalyzeOptions": "imupipe.analysis.analyze",
+        "ConditionedSeries": "imupipe.analysis.condition",
+        **dict.fromkeys(
+            ("ALLAN_SCHEMA", "AnalysisResult", "AxisResult", "InputSummary"),
+            "imupipe.analysis.results",
+        ),
+    },
+)

@@ -4,7 +4,9 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from imupipe import lazy_names
 
 if TYPE_CHECKING:
     from imupipe.report.report import format_table, write_report
@@ -12,18 +14,16 @@ if TYPE_CHECKING:
 
 __all__ = ["RrdWriter", "format_table", "open_viewer", "write_report"]
 
-
-def __getattr__(name: str) -> Any:
-    """PEP 562: each name loads its module on first use only — the Rerun names rerun-sdk
-    (~0.3 s of CPU), so that ``imupipe info`` or ``analyze --no-rrd`` never import it, and the
-    report's the analysis (numba, polars, scipy: ~0.9 s), so that a submodule such as
-    :mod:`.exports` (``imupipe --help``, ``view``, ``export``) does not."""
-    if name in ("RrdWriter", "open_viewer"):
-        from imupipe.report import rerun_view
-
-        return getattr(rerun_view, name)
-    if name in ("format_table", "write_report"):
-        from imupipe.report import report
-
-        return getattr(report, name)
-    raise AttributeError(f"module 'imupipe.report' has no attribute {name!r}")
+# Each name loads its module on first use: the Rerun names rerun-sdk (~0.3 s of CPU), so that
+# ``imupipe info`` or ``analyze --no-rrd`` never import it; the report's names the analysis
+# (numba, polars, scipy: ~0.9 s), so that a submodule such as :mod:`.exports` (``imupipe
+# --help``, ``view``, ``export``) does not.
+__getattr__ = lazy_names(
+    "imupipe.report",
+    {
+        "RrdWriter": "imupipe.report.rerun_view",
+        "open_viewer": "imupipe.report.rerun_view",
+        "format_table": "imupipe.report.report",
+        "write_report": "imupipe.report.report",
+    },
+)

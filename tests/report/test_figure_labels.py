@@ -47,34 +47,29 @@ def test_a_reports_figures_parse_no_mathtext(
     assert len(written) == 3 and parsed == []
 
 
-def test_labels_of_a_narrow_log_view_name_its_minor_ticks() -> None:
-    """A view under a decade wide labels its minor ticks (matplotlib's rule), as 2×10⁻⁴ …"""
+def _minor_labels(lo: float, hi: float) -> list[str]:
+    """The minor tick labels of a log y axis viewing ``lo`` to ``hi``, as drawn."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots()
     try:
-        ax.plot([0, 1], [2e-4, 9e-4])
+        ax.plot([0, 1], [lo, hi])
         ax.set_yscale("log")
         figures.log_labels(ax.yaxis)
         fig.canvas.draw()
-        labels = [t.get_text() for t in ax.yaxis.get_ticklabels(minor=True) if t.get_text()]
+        return [t.get_text() for t in ax.yaxis.get_ticklabels(minor=True) if t.get_text()]
     finally:
         plt.close(fig)
+
+
+def test_labels_of_a_narrow_log_view_name_its_minor_ticks() -> None:
+    """A view under a decade wide labels its minor ticks (matplotlib's rule), as 2×10⁻⁴ …"""
+    labels = _minor_labels(2e-4, 9e-4)
     assert "2×10⁻⁴" in labels and "4×10⁻⁴" in labels
 
 
 def test_a_view_narrower_than_a_decade_has_distinct_labels() -> None:
     """A fleet's N within ±10 % of 5×10⁻²: matplotlib puts minor ticks at 4.4, 4.6, … ×10⁻²."""
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots()
-    try:
-        ax.plot([0, 1], [4.55e-2, 5.45e-2])
-        ax.set_yscale("log")
-        figures.log_labels(ax.yaxis)
-        fig.canvas.draw()
-        labels = [t.get_text() for t in ax.yaxis.get_ticklabels(minor=True) if t.get_text()]
-    finally:
-        plt.close(fig)
+    labels = _minor_labels(4.55e-2, 5.45e-2)
     assert len(labels) >= 3 and len(set(labels)) == len(labels)
     assert "4.6×10⁻²" in labels and "5×10⁻²" in labels
