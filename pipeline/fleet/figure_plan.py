@@ -11,8 +11,9 @@ from pathlib import Path
 
 import polars as pl
 
-from imupipe.fleet.population import TermStats
-from imupipe.vocab import SENSOR_TITLES
+from imupipe.fleet.curves import UNIT_COLUMN
+from imupipe.fleet.population import TermStats, final_terms
+from imupipe.vocab import AXES_OF, SENSOR_TITLES
 
 FigureJob = tuple[str, tuple]
 """The name of a figure function of :mod:`imupipe.fleet.figures` and its arguments (picklable:
@@ -30,22 +31,44 @@ def draw(job: FigureJob) -> bytes | None:
     return getattr(figures, name)(*args)
 
 
+CURVE_COLUMNS = (UNIT_COLUMN, "axis", "unit", "tau", "adev")
+"""The columns of the fleet's curves an ADEV figure draws."""
+
+
+def _final_terms_of(reports: Mapping[str, dict], axes: tuple[str, ...]) -> dict[str, dict]:
+    """Each unit's final IEEE 952 terms on ``axes``, shaped as its report: all a strip plot
+    reads of a report.json (~1 % of it)."""
+    return {
+        name: {
+            "axes": {a: {"ieee952": final_terms(doc)} for a, doc in r["axes"].items() if a in axes}
+        }
+        for name, r in reports.items()
+    }
+
+
 def figure_jobs(
     fleet: pl.DataFrame, pop: pl.DataFrame, reports: Mapping[str, dict], stats: list[TermStats]
 ) -> list[tuple[str, str, FigureJob]]:
     """(caption, file name, job) of every fleet figure: per sensor, the ADEV overlay and the
-    strip plots."""
+    strip plots.  Each job carries only what its figure draws (its sensor's curves and final
+    terms): a job with every report and curve was ~80 kB per unit, and Dask warned of a
+    10 MB task graph at 120 units."""
     jobs: list[tuple[str, str, FigureJob]] = []
     for sensor in ("gyro", "accel"):
+        axes = AXES_OF[sensor]
+        mine = pl.col("axis").is_in(axes)
         jobs.append((
             f"{SENSOR_TITLES[sensor]}: Allan deviation of every unit",
             f"fleet_adev_{sensor}.png",
-            ("adev_figure", (fleet, pop, sensor)),
+            ("adev_figure", (fleet.filter(mine).select(CURVE_COLUMNS), pop.filter(mine), sensor)),
         ))  # fmt: skip
         jobs.append((
             f"{SENSOR_TITLES[sensor]}: N, B, K per unit",
             f"fleet_terms_{sensor}.png",
-            ("terms_figure", (reports, stats, sensor)),
+            (
+                "terms_figure",
+                (_final_terms_of(reports, axes), [s for s in stats if s.axis in axes], sensor),
+            ),
         ))  # fmt: skip
     return jobs
 

@@ -120,6 +120,8 @@ def run_fleet(
 
 def _on_workers(client: Client, func: Callable, jobs: list) -> Iterator:
     """The fleet report's figures drawn on the cluster's workers, in parallel, while the
-    client writes the rest of the report: submitted now, gathered when iterated."""
-    futures = client.map(func, jobs, pure=False)
+    client writes the rest of the report: submitted now, gathered when iterated.  The jobs'
+    data go to the workers as scattered data, not inside the task graph (Dask's advice; the
+    graph of a large fleet's figures would otherwise carry all their curves)."""
+    futures = client.map(func, client.scatter(jobs, hash=False), pure=False)
     return (future.result() for future in futures)

@@ -375,6 +375,46 @@ def test_a_strip_plot_shows_its_units_not_a_tolerance_interval_of_two(monkeypatc
     assert lo == pytest.approx(0.9e-5 * unit / 1.3) and hi == pytest.approx(2.2e-5 * unit * 1.3)
 
 
+def test_figure_jobs_carry_only_what_their_figure_draws():
+    # a job with every report and curve was ~80 kB per unit: Dask warned of a 10 MB graph
+    # at 120 units; the figures drawn from the slim jobs are the same PNGs
+    from imupipe.fleet import figures
+    from imupipe.fleet.figure_plan import CURVE_COLUMNS, draw, figure_jobs
+    from imupipe.vocab import AXES, AXES_OF, TERM_NAMES
+
+    rng = np.random.default_rng(5)
+    tau = np.geomspace(0.01, 100.0, 9)
+
+    def unit(scale):
+        terms = {t: {"value": scale, "lo": 0.9 * scale, "hi": 1.1 * scale, "unit": "u"}
+                 for t in TERM_NAMES}  # fmt: skip
+        doc = {"ieee952": terms, "ieee952_after": terms, "effects": [{"evidence": "x" * 4000}]}
+        curve = pl.DataFrame(
+            {"axis": np.repeat(AXES, len(tau)), "unit": "u", "tau": np.tile(tau, len(AXES)),
+             "adev": scale / np.sqrt(np.tile(tau, len(AXES))), "lo": np.nan, "hi": np.nan,
+             "edf": 1.0, "terms": 1, "alpha": 0.0, "adev_after": np.nan, "model_before": np.nan,
+             "model_after": np.nan, "z_before": np.nan, "z_after": np.nan},
+            schema=ALLAN_SCHEMA,
+        )  # fmt: skip
+        return {"axes": dict.fromkeys(AXES, doc)}, curve
+
+    units = {f"u{i}": unit(float(v)) for i, v in enumerate(rng.lognormal(0, 0.05, 40))}
+    reports = {name: r for name, (r, _) in units.items()}
+    fleet = fleet_frame({name: c for name, (_, c) in units.items()})
+    pop, stats = population_curves(fleet), population(reports)
+    jobs = figure_jobs(fleet, pop, reports, stats)
+    for _, _, job in jobs:
+        name, (data, *_, sensor) = job
+        if name == "adev_figure":
+            assert data.columns == list(CURVE_COLUMNS)
+            assert set(data["axis"]) == set(AXES_OF[sensor])
+            assert draw(job) == figures.adev_figure(fleet, pop, sensor)
+        else:
+            assert {a for r in data.values() for a in r["axes"]} == set(AXES_OF[sensor])
+            assert all(set(d) == {"ieee952"} for r in data.values() for d in r["axes"].values())
+            assert draw(job) == figures.terms_figure(reports, stats, sensor)
+
+
 def test_worker_memory_caps_the_analysis_budget():
     options = AnalyzeOptions(memory_budget_bytes=2_000_000_000)
     assert budget_for_worker(options, None) == AnalyzeOptions(workers=1)  # a worker is one core
