@@ -57,7 +57,15 @@ class UnitTerm:
 @dataclass(frozen=True)
 class TermStats:
     """The population of one (axis, term): counts, median and robust spread (SI, fraction),
-    95 %/95 % tolerance interval and its method, outlier units, datasheet verdicts."""
+    95 %/95 % tolerance interval and its method, outlier units, datasheet verdicts.
+
+    When fewer units resolve the term than only bound it (a rate random walk or a bias
+    instability on short records), the resolved few are those whose noise lifted them above
+    their bound: their median, spread and tolerance interval would describe them, not the lot
+    (120 units of 2 min: B "resolved" on 2, their median 3× the true B).  Then ``median``,
+    ``robust_spread`` and ``tolerance`` are None and ``median_bound`` is an upper bound on the
+    population median: the median of the resolved values and the others' upper bounds (each
+    unit's true value is at most what it counts with)."""
 
     axis: str
     term: str
@@ -65,6 +73,7 @@ class TermStats:
     units: int
     resolved: int
     median: float | None
+    median_bound: float | None
     robust_spread: float | None
     tolerance: tuple[float, float] | None
     method: str | None
@@ -178,21 +187,31 @@ def term_stats(
 ) -> TermStats:
     """The population statistics of one (axis, term) (module doc)."""
     values = [u.value for u in units if u.value is not None]
-    median = float(np.median(values)) if values else None
+    bounds = [u.hi for u in units if u.value is None and u.hi is not None]
+    censored = len(values) < len(bounds)
+    median_bound = float(np.median(values + bounds)) if censored else None
+    kept = [] if censored else values
+    median = float(np.median(kept)) if kept else None
     spread = (
-        float(MAD_TO_SIGMA * np.median(np.abs(np.asarray(values) - median)) / median)
-        if values
+        float(MAD_TO_SIGMA * np.median(np.abs(np.asarray(kept) - median)) / median)
+        if kept
         else None
     )
-    ti = tolerance_interval(values)
+    ti = tolerance_interval(kept)
     population_pass, failing = None, ()
-    if datasheet is not None and values:
+    if datasheet is not None and (values or bounds):
         limit = datasheet.si()
         failing = tuple(u.unit for u in units if (iv := _interval(u)) is not None and iv[0] > limit)
-        if datasheet.kind == "typical":
+        if median is not None and datasheet.kind == "typical":
             population_pass = median <= limit
-        else:
+        elif datasheet.kind == "typical":  # the median is at most its bound; above, unknown
+            population_pass = True if median_bound <= limit else None
+        elif not censored:
             population_pass = (ti[0][1] if ti else max(values)) <= limit
+        elif max(values + bounds) <= limit:  # every unit at most its value or bound
+            population_pass = True
+        elif max(values, default=0.0) > limit:  # a resolved unit above the maximum
+            population_pass = False
     return TermStats(
         axis=axis,
         term=term,
@@ -200,6 +219,7 @@ def term_stats(
         units=len(units),
         resolved=len(values),
         median=median,
+        median_bound=median_bound,
         robust_spread=spread,
         tolerance=ti[0] if ti else None,
         method=ti[1] if ti else None,

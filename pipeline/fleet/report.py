@@ -71,6 +71,7 @@ def _stats_json(s: TermStats) -> dict:
         "units": s.units,
         "resolved": s.resolved,
         "median": s.median,
+        "median_upper_bound": s.median_bound,
         "robust_spread": s.robust_spread,
         "tolerance": None
         if s.tolerance is None
@@ -154,7 +155,7 @@ def population_rows(stats: list[TermStats]) -> list[tuple[str, ...]]:
                 s.term,
                 unit,
                 f"{s.resolved}/{s.units}",
-                _in(s.median, unit),
+                _in(s.median, unit) if s.median_bound is None else f"≤ {_in(s.median_bound, unit)}",
                 spread,
                 ti,
                 ", ".join(s.outliers) or "none",
@@ -225,7 +226,10 @@ def fleet_markdown(
         "## Population",
         "",
         "Final IEEE 952 terms (after the closed loop where it ran) in the paper's units. "
-        "resolved: units whose term was resolved / units analysed. spread: 1.4826·MAD/median. "
+        "resolved: units whose term was resolved / units analysed; where fewer units resolve it "
+        "than only bound it, the median is given as ≤ an upper bound (the median of the "
+        "resolved values and the others' bounds) and no spread or tolerance interval, which "
+        "would describe the few resolved units, not the lot. spread: 1.4826·MAD/median. "
         f"Tolerance interval: holds {COVERAGE:.0%} of units with {CONFIDENCE:.0%} confidence, "
         f"by {'; '.join(methods) or '—'}. Outliers: units whose own 95 % interval lies outside "
         "the other units' tolerance interval.",

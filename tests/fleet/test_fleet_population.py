@@ -180,6 +180,41 @@ def test_datasheet_pass_fail(tmp_path):
     assert st.median < b and st.tolerance[1] > b and st.population_pass is False
 
 
+def test_a_term_most_units_only_bound_gets_a_median_bound_not_the_few_resolved(tmp_path):
+    # two of five units resolve B (their noise lifted it above their bound): their median
+    # (3.0) would read as the lot's; the lot's median is at most the median of all five
+    # counted at their value or bound
+    units = [
+        *_units([2.0, 4.0]),
+        *(UnitTerm(f"b{k}", None, None, hi) for k, hi in enumerate((1.0, 1.5, 2.5))),
+    ]
+    st = term_stats("gyro_x", "bias_instability", "u", units)
+    assert (st.median, st.median_bound, st.resolved, st.units) == (None, 2.0, 2, 5)
+    assert st.robust_spread is None and st.tolerance is None
+    sheet = _sheet(
+        tmp_path,
+        'part = "P"\n[gyro]\nbias_instability = { value = 0.25, unit = "rad/s" }\n'
+        'rate_random_walk = { value = 3.0, unit = "rad/s^2/sqrt(Hz)", kind = "max" }\n',
+    )
+    assert sheet.get("gyro", "bias_instability").si() == 0.25
+    typical = sheet.get("gyro", "bias_instability")
+    assert term_stats("gyro_x", "bias_instability", "u", units, typical).population_pass is None
+    low = [
+        *_units([0.1, 0.2]),
+        *(UnitTerm(f"b{k}", None, None, hi) for k, hi in enumerate((0.05, 0.3, 0.4))),
+    ]
+    assert term_stats("gyro_x", "bias_instability", "u", low, typical).population_pass is True
+    # a maximum: decided by the extremes (a resolved unit above it fails the lot)
+    top = sheet.get("gyro", "rate_random_walk")
+    assert term_stats("gyro_x", "rate_random_walk", "u", units, top).population_pass is False
+    assert term_stats("gyro_x", "rate_random_walk", "u", units[1:], top).population_pass is False
+    under = [*units[:1], *units[2:]]  # 2.0 resolved; bounds 1.0, 1.5, 2.5: max 2.5 <= 3
+    assert term_stats("gyro_x", "rate_random_walk", "u", under, top).population_pass is True
+    # half or more resolved: the resolved units' statistics, as before
+    st = term_stats("gyro_x", "bias_instability", "u", units[:4])
+    assert (st.median, st.median_bound) == (3.0, None)
+
+
 @pytest.mark.parametrize(
     ("body", "message"),
     [
