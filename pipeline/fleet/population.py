@@ -20,6 +20,11 @@ For each (axis, term) over the units whose term is resolved:
   lies entirely above the value (its lower bound exceeds it); the population fails a
   ``typical`` value when its median exceeds it, a ``max`` value when the upper tolerance bound
   does.
+
+A term that fewer units resolve than only bound (an upper bound, e.g. a rate random walk on
+short records) gets none of these but an upper bound on the population median, the median of
+the resolved values and the other units' bounds (:class:`TermStats`); no unit is called an
+outlier of it, and the datasheet verdicts follow the bounds.
 """
 
 from __future__ import annotations
@@ -223,7 +228,7 @@ def term_stats(
         robust_spread=spread,
         tolerance=ti[0] if ti else None,
         method=ti[1] if ti else None,
-        outliers=outlier_units(units),
+        outliers=() if censored else outlier_units(units),
         datasheet=datasheet,
         population_pass=population_pass,
         failing_units=failing,

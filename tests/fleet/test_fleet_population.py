@@ -191,6 +191,11 @@ def test_a_term_most_units_only_bound_gets_a_median_bound_not_the_few_resolved(t
     st = term_stats("gyro_x", "bias_instability", "u", units)
     assert (st.median, st.median_bound, st.resolved, st.units) == (None, 2.0, 2, 5)
     assert st.robust_spread is None and st.tolerance is None
+    # no outlier of a lot whose tolerance interval is not known
+    far = [*_units([2.0, 2.2, 2.4, 2.6]), UnitTerm("far", 2e3, 1.9e3, 2.1e3)]
+    bounded = [UnitTerm(f"c{k}", None, None, 3.0) for k in range(6)]
+    assert outlier_units(far + bounded) == ("far",)  # the rule alone would name it
+    assert term_stats("gyro_x", "bias_instability", "u", far + bounded).outliers == ()
     sheet = _sheet(
         tmp_path,
         'part = "P"\n[gyro]\nbias_instability = { value = 0.25, unit = "rad/s" }\n'
