@@ -21,10 +21,12 @@ For each (axis, term) over the units whose term is resolved:
   ``typical`` value when its median exceeds it, a ``max`` value when the upper tolerance bound
   does.
 
-A term that fewer units resolve than only bound (an upper bound, e.g. a rate random walk on
-short records) gets none of these but an upper bound on the population median, the median of
-the resolved values and the other units' bounds (:class:`TermStats`); no unit is called an
-outlier of it, and the datasheet verdicts follow the bounds.
+Units that only bound a term (an upper bound: a rate random walk, or B on short records) are
+counted anywhere between 0 and their bound.  The median is given when that does not move it;
+otherwise the range it lies in (:class:`TermStats`).  The spread and Howe's interval need every
+unit's value and are left out; the distribution-free interval counts those units at 0 for its
+lower end and at their bound for its upper one.  When fewer units resolve the term than only
+bound it, no unit is called an outlier of it; the datasheet verdicts follow the ranges.
 """
 
 from __future__ import annotations
@@ -46,6 +48,9 @@ CONFIDENCE = 0.95
 MIN_OTHERS_FOR_OUTLIER = 3
 HOWE_METHOD = "Howe k-factor on log10 values (log-normal across units)"
 ORDER_METHOD = "order statistics (distribution-free, Wilks)"
+BOUNDED_ORDER_METHOD = (
+    f"{ORDER_METHOD}; units that only bound the term counted at 0 below and at their bound above"
+)
 
 
 @dataclass(frozen=True)
@@ -64,13 +69,13 @@ class TermStats:
     """The population of one (axis, term): counts, median and robust spread (SI, fraction),
     95 %/95 % tolerance interval and its method, outlier units, datasheet verdicts.
 
-    When fewer units resolve the term than only bound it (a rate random walk or a bias
-    instability on short records), the resolved few are those whose noise lifted them above
-    their bound: their median, spread and tolerance interval would describe them, not the lot
-    (120 units of 2 min: B "resolved" on 2, their median 3× the true B).  Then ``median``,
-    ``robust_spread`` and ``tolerance`` are None and ``median_bound`` is an upper bound on the
-    population median: the median of the resolved values and the others' upper bounds (each
-    unit's true value is at most what it counts with)."""
+    A unit that only bounds the term (value None, upper bound ``hi``) has its true value
+    somewhere in [0, hi].  The lot's median then lies between the median of the resolved
+    values with those units at 0 and with them at their bound: ``median`` when the two are
+    equal, else None and ``median_range`` = (low, high).  This matters most when few units
+    resolve the term: those are the ones whose noise lifted it above their bound (120 units of
+    2 min: B "resolved" on 2, their median 3× the true B), and the range is [0, bound).
+    ``robust_spread`` is given only when every unit resolves the term."""
 
     axis: str
     term: str
@@ -78,7 +83,7 @@ class TermStats:
     units: int
     resolved: int
     median: float | None
-    median_bound: float | None
+    median_range: tuple[float, float] | None
     robust_spread: float | None
     tolerance: tuple[float, float] | None
     method: str | None
@@ -149,6 +154,31 @@ def _without_each(x: np.ndarray) -> np.ndarray:
     return np.column_stack((np.where(j > lo, x[lo], x[lo + 1]), np.where(j > hi, x[hi], x[hi + 1])))
 
 
+def _bounded_order_interval(
+    values: Sequence[float], bounds: Sequence[float]
+) -> tuple[tuple[float, float], str] | None:
+    """The distribution-free 95 %/95 % interval of a lot some of whose units only bound the term
+    (at most ``bounds``): its r-th smallest unit is at least the r-th of the values with those
+    units at 0 and its r-th largest at most the r-th largest with them at their bound, so the
+    interval between those two holds the lot's own.  None below 93 units (Howe's interval needs
+    every value) or when the bounded units reach the lower order statistic (it is then 0)."""
+    n = len(values) + len(bounds)
+    r = order_statistic_rank(n) if n >= 2 else None
+    if r is None or len(bounds) >= r:
+        return None
+    low = np.sort(np.asarray(values, dtype=float))[r - 1 - len(bounds)]
+    high = np.sort(np.asarray([*values, *bounds], dtype=float))[n - r]
+    return (float(low), float(high)), BOUNDED_ORDER_METHOD
+
+
+def _verdict_of_range(low: float, high: float, limit: float) -> bool | None:
+    """Pass when a quantity known to lie in [``low``, ``high``] is at most ``limit``, fail when
+    it exceeds it, None when the range straddles it."""
+    if high <= limit:
+        return True
+    return False if low > limit else None
+
+
 def outlier_units(units: Sequence[UnitTerm]) -> tuple[str, ...]:
     """Units whose 95 % interval misses the others' tolerance interval (module doc): the
     resolved others of a resolved unit are all the resolved units but itself, those of an
@@ -193,30 +223,31 @@ def term_stats(
     """The population statistics of one (axis, term) (module doc)."""
     values = [u.value for u in units if u.value is not None]
     bounds = [u.hi for u in units if u.value is None and u.hi is not None]
-    censored = len(values) < len(bounds)
-    median_bound = float(np.median(values + bounds)) if censored else None
-    kept = [] if censored else values
-    median = float(np.median(kept)) if kept else None
+    counted = values or bounds
+    low = float(np.median(values + [0.0] * len(bounds))) if counted else None
+    high = float(np.median(values + bounds)) if counted else None
+    median = low if low == high else None
+    median_range = None if low == high else (low, high)
     spread = (
-        float(MAD_TO_SIGMA * np.median(np.abs(np.asarray(kept) - median)) / median)
-        if kept
+        float(MAD_TO_SIGMA * np.median(np.abs(np.asarray(values) - median)) / median)
+        if len(values) >= 2 and not bounds
         else None
     )
-    ti = tolerance_interval(kept)
+    ti = tolerance_interval(values) if not bounds else _bounded_order_interval(values, bounds)
     population_pass, failing = None, ()
-    if datasheet is not None and (values or bounds):
+    if datasheet is not None and counted:
         limit = datasheet.si()
         failing = tuple(u.unit for u in units if (iv := _interval(u)) is not None and iv[0] > limit)
-        if median is not None and datasheet.kind == "typical":
-            population_pass = median <= limit
-        elif datasheet.kind == "typical":  # the median is at most its bound; above, unknown
-            population_pass = True if median_bound <= limit else None
-        elif not censored:
-            population_pass = (ti[0][1] if ti else max(values)) <= limit
-        elif max(values + bounds) <= limit:  # every unit at most its value or bound
-            population_pass = True
-        elif max(values, default=0.0) > limit:  # a resolved unit above the maximum
-            population_pass = False
+        if datasheet.kind == "typical":  # the median, or the range it lies in
+            population_pass = _verdict_of_range(low, high, limit)
+        elif ti is not None:  # a maximum: the upper tolerance end, counting bounds at the bound
+            population_pass = ti[0][1] <= limit
+        elif not bounds:  # one unit
+            population_pass = max(values) <= limit
+        else:  # every unit under it, or a resolved unit above it
+            population_pass = _verdict_of_range(
+                max(values, default=0.0), max(values + bounds), limit
+            )
     return TermStats(
         axis=axis,
         term=term,
@@ -224,11 +255,11 @@ def term_stats(
         units=len(units),
         resolved=len(values),
         median=median,
-        median_bound=median_bound,
+        median_range=median_range,
         robust_spread=spread,
         tolerance=ti[0] if ti else None,
         method=ti[1] if ti else None,
-        outliers=() if censored else outlier_units(units),
+        outliers=() if len(values) < len(bounds) else outlier_units(units),
         datasheet=datasheet,
         population_pass=population_pass,
         failing_units=failing,

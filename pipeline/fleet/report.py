@@ -71,7 +71,8 @@ def _stats_json(s: TermStats) -> dict:
         "units": s.units,
         "resolved": s.resolved,
         "median": s.median,
-        "median_upper_bound": s.median_bound,
+        "median_lower_bound": s.median_range[0] if s.median_range else None,
+        "median_upper_bound": s.median_range[1] if s.median_range else None,
         "robust_spread": s.robust_spread,
         "tolerance": None
         if s.tolerance is None
@@ -140,6 +141,15 @@ def _verdict(s: TermStats) -> str:
     return text
 
 
+def _median_cell(s: TermStats, unit: str) -> str:
+    """The median, or the range it lies in when some units only bound the term: "≤ high" when
+    its low end is 0, "low – high" otherwise."""
+    if s.median_range is None:
+        return _in(s.median, unit)
+    low, high = s.median_range
+    return f"≤ {_in(high, unit)}" if low == 0 else f"{_in(low, unit)} – {_in(high, unit)}"
+
+
 def population_rows(stats: list[TermStats]) -> list[tuple[str, ...]]:
     """fleet.md's population table in the paper's units (:data:`PAPER_UNIT`)."""
     rows = []
@@ -155,7 +165,7 @@ def population_rows(stats: list[TermStats]) -> list[tuple[str, ...]]:
                 s.term,
                 unit,
                 f"{s.resolved}/{s.units}",
-                _in(s.median, unit) if s.median_bound is None else f"≤ {_in(s.median_bound, unit)}",
+                _median_cell(s, unit),
                 spread,
                 ti,
                 ", ".join(s.outliers) or "none",
@@ -226,10 +236,11 @@ def fleet_markdown(
         "## Population",
         "",
         "Final IEEE 952 terms (after the closed loop where it ran) in the paper's units. "
-        "resolved: units whose term was resolved / units analysed; where fewer units resolve it "
-        "than only bound it, the median is given as ≤ an upper bound (the median of the "
-        "resolved values and the others' bounds) and no spread or tolerance interval, which "
-        "would describe the few resolved units, not the lot. spread: 1.4826·MAD/median. "
+        "resolved: units whose term was resolved / units analysed. A unit that only bounds a term "
+        "is counted anywhere between 0 and its bound: where that moves the median, the median "
+        "column gives the range it lies in (≤ the high end when the low end is 0); the spread, "
+        "and below 93 units the tolerance interval, need every unit's value and are not given "
+        "then. spread: 1.4826·MAD/median. "
         f"Tolerance interval: holds {COVERAGE:.0%} of units with {CONFIDENCE:.0%} confidence, "
         f"by {'; '.join(methods) or '—'}. Outliers: units whose own 95 % interval lies outside "
         "the other units' tolerance interval.",

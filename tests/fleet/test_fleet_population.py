@@ -15,6 +15,7 @@ from imupipe.errors import DatasheetError, FleetError
 from imupipe.fleet.curves import fleet_frame, population_curves
 from imupipe.fleet.discover import MAX_NAME, discover, unique_names
 from imupipe.fleet.population import (
+    BOUNDED_ORDER_METHOD,
     HOWE_METHOD,
     ORDER_METHOD,
     UnitTerm,
@@ -28,7 +29,7 @@ from imupipe.fleet.population import (
 )
 from imupipe.fleet.report import md_text
 from imupipe.fleet.task import budget_for_worker
-from imupipe.report.datasheet import load_datasheet
+from imupipe.report.datasheet import Spec, load_datasheet
 from imupipe.units import RAD_PER_DEG
 
 
@@ -180,17 +181,27 @@ def test_datasheet_pass_fail(tmp_path):
     assert st.median < b and st.tolerance[1] > b and st.population_pass is False
 
 
-def test_a_term_most_units_only_bound_gets_a_median_bound_not_the_few_resolved(tmp_path):
+def test_units_that_only_bound_a_term_give_the_range_the_median_lies_in(tmp_path):
     # two of five units resolve B (their noise lifted it above their bound): their median
-    # (3.0) would read as the lot's; the lot's median is at most the median of all five
-    # counted at their value or bound
+    # (3.0) would read as the lot's; the lot's median lies between the median of all five
+    # with the bounded units at 0 (0.0) and at their bound (2.0)
     units = [
         *_units([2.0, 4.0]),
         *(UnitTerm(f"b{k}", None, None, hi) for k, hi in enumerate((1.0, 1.5, 2.5))),
     ]
     st = term_stats("gyro_x", "bias_instability", "u", units)
-    assert (st.median, st.median_bound, st.resolved, st.units) == (None, 2.0, 2, 5)
+    assert (st.median, st.median_range, st.resolved, st.units) == (None, (0.0, 2.0), 2, 5)
     assert st.robust_spread is None and st.tolerance is None
+    # half or more resolved: [0, 0, 2, 4] -> 1.0 and [1, 1.5, 2, 4] -> 1.75, not the resolved 3.0
+    st = term_stats("gyro_x", "bias_instability", "u", units[:4])
+    assert (st.median, st.median_range) == (None, (1.0, 1.75))
+    assert st.robust_spread is None and st.tolerance is None  # Howe's needs every value
+    # bounds under the median do not move it: [0, 2, 4, 5, 6] and [0.5, 2, 4, 5, 6] -> 4.0
+    low = [*_units([2.0, 4.0, 5.0, 6.0]), UnitTerm("b", None, None, 0.5)]
+    assert (term_stats("gyro_x", "bias_instability", "u", low).median,) == (4.0,)
+    # one resolved unit has no spread (its MAD of 0 is not a spread of 0 %)
+    one = term_stats("gyro_x", "bias_instability", "u", _units([2.0]))
+    assert (one.median, one.robust_spread, one.tolerance) == (2.0, None, None)
     # no outlier of a lot whose tolerance interval is not known
     far = [*_units([2.0, 2.2, 2.4, 2.6]), UnitTerm("far", 2e3, 1.9e3, 2.1e3)]
     bounded = [UnitTerm(f"c{k}", None, None, 3.0) for k in range(6)]
@@ -209,15 +220,63 @@ def test_a_term_most_units_only_bound_gets_a_median_bound_not_the_few_resolved(t
         *(UnitTerm(f"b{k}", None, None, hi) for k, hi in enumerate((0.05, 0.3, 0.4))),
     ]
     assert term_stats("gyro_x", "bias_instability", "u", low, typical).population_pass is True
+    # a typical value under the whole range fails the lot: [0.3, 0.3, 0.5] -> [0.3, 0.4]
+    high = [*_units([0.3, 0.5]), UnitTerm("b", None, None, 0.4)]
+    st = term_stats("gyro_x", "bias_instability", "u", high, typical)
+    assert (st.median_range, st.population_pass) == ((0.3, 0.4), False)
     # a maximum: decided by the extremes (a resolved unit above it fails the lot)
     top = sheet.get("gyro", "rate_random_walk")
     assert term_stats("gyro_x", "rate_random_walk", "u", units, top).population_pass is False
     assert term_stats("gyro_x", "rate_random_walk", "u", units[1:], top).population_pass is False
     under = [*units[:1], *units[2:]]  # 2.0 resolved; bounds 1.0, 1.5, 2.5: max 2.5 <= 3
     assert term_stats("gyro_x", "rate_random_walk", "u", under, top).population_pass is True
-    # half or more resolved: the resolved units' statistics, as before
-    st = term_stats("gyro_x", "bias_instability", "u", units[:4])
-    assert (st.median, st.median_bound) == (3.0, None)
+    assert term_stats("gyro_x", "rate_random_walk", "u", units[:4], top).population_pass is False
+    straddle = [*_units([2.0, 2.5]), UnitTerm("b", None, None, 3.5)]  # max 2.5 <= 3 < 3.5
+    assert term_stats("gyro_x", "rate_random_walk", "u", straddle, top).population_pass is None
+
+
+def test_the_distribution_free_interval_counts_bounded_units_at_zero_and_at_their_bound():
+    # 250 units (r = 3): 248 resolved 1..248 and two bounded at 0.5 and 500; the lot's third
+    # smallest is at least 1 (0, 0, 1 with the bounded units at 0) and its third largest at
+    # most 247 (247, 248, 500 with them at their bound)
+    values = [float(v) for v in range(1, 249)]
+    units = [*_units(values), UnitTerm("b0", None, None, 0.5), UnitTerm("b1", None, None, 500.0)]
+    assert order_statistic_rank(250) == 3
+    st = term_stats("gyro_x", "random_walk", "u", units)
+    assert st.tolerance == (1.0, 247.0) and st.method == BOUNDED_ORDER_METHOD
+    assert st.median is None and st.median_range == (123.5, 124.5)  # the 125th and 126th
+    # as many bounded units as the rank: the lower end is 0, no interval
+    three = [*units, UnitTerm("b2", None, None, 0.7)]
+    assert term_stats("gyro_x", "random_walk", "u", three).tolerance is None
+    # a maximum is judged by that interval's upper end
+    sheet = Spec(value=247.0, unit="rad/s/sqrt(Hz)", kind="max")
+    assert term_stats("gyro_x", "random_walk", "u", units, sheet).population_pass is True
+
+
+def test_the_median_range_reaches_fleet_json_and_fleet_md():
+    from imupipe.fleet.report import _stats_json, population_rows
+
+    def rw(units):
+        return term_stats("gyro_x", "random_walk", "rad/s/sqrt(Hz)", units)
+
+    half = rw([*_units([2e-3, 4e-3]), UnitTerm("b", None, None, 1e-3)])  # [0, 2, 4], [1, 2, 4]
+    most = rw([*_units([2e-3]), *(UnitTerm(f"b{k}", None, None, 1e-3) for k in range(2))])
+    exact = rw(_units([2e-3, 4e-3, 5e-3]))
+    doc = _stats_json(most)
+    assert (doc["median"], doc["median_lower_bound"], doc["median_upper_bound"]) == (
+        None, 0.0, 1e-3
+    )  # fmt: skip
+    assert _stats_json(half)["median"] == 2e-3 and _stats_json(half)["median_upper_bound"] is None
+    straddle = rw([*_units([2e-3, 4e-3]), UnitTerm("b", None, None, 3e-3)])  # 2 and 3 (e-3)
+    assert (_stats_json(straddle)["median_lower_bound"], _stats_json(straddle)["median"]) == (
+        2e-3, None
+    )  # fmt: skip
+    deg = 180 / math.pi  # rad/s/sqrt(Hz) -> the paper's °/√s
+    rows = {i: r[4:6] for i, r in enumerate(population_rows([most, straddle, exact, half]))}
+    assert rows[0] == (f"≤ {1e-3 * deg:.4g}", "—")
+    assert rows[1] == (f"{2e-3 * deg:.4g} – {3e-3 * deg:.4g}", "—")
+    assert rows[2][0] == f"{4e-3 * deg:.4g}" and rows[2][1] != "—"
+    assert rows[3] == (f"{2e-3 * deg:.4g}", "—")  # exact, but no spread with a bound
 
 
 @pytest.mark.parametrize(
