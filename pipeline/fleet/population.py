@@ -163,7 +163,7 @@ def _bounded_order_interval(
     interval between those two holds the lot's own.  None below 93 units (Howe's interval needs
     every value) or when the bounded units reach the lower order statistic (it is then 0)."""
     n = len(values) + len(bounds)
-    r = order_statistic_rank(n) if n >= 2 else None
+    r = order_statistic_rank(n)
     if r is None or len(bounds) >= r:
         return None
     low = np.sort(np.asarray(values, dtype=float))[r - 1 - len(bounds)]

@@ -248,6 +248,8 @@ def test_the_distribution_free_interval_counts_bounded_units_at_zero_and_at_thei
     # as many bounded units as the rank: the lower end is 0, no interval
     three = [*units, UnitTerm("b2", None, None, 0.7)]
     assert term_stats("gyro_x", "random_walk", "u", three).tolerance is None
+    four = [*three, UnitTerm("b3", None, None, 0.8)]  # more bounded units than the rank
+    assert term_stats("gyro_x", "random_walk", "u", four).tolerance is None
     # a maximum is judged by that interval's upper end
     sheet = Spec(value=247.0, unit="rad/s/sqrt(Hz)", kind="max")
     assert term_stats("gyro_x", "random_walk", "u", units, sheet).population_pass is True
@@ -277,6 +279,54 @@ def test_the_median_range_reaches_fleet_json_and_fleet_md():
     assert rows[1] == (f"{2e-3 * deg:.4g} – {3e-3 * deg:.4g}", "—")
     assert rows[2][0] == f"{4e-3 * deg:.4g}" and rows[2][1] != "—"
     assert rows[3] == (f"{2e-3 * deg:.4g}", "—")  # exact, but no spread with a bound
+
+
+def test_population_verdicts_at_their_boundaries(tmp_path):
+    # a typical value equal to the median passes; a kind spelled out in the file is the same
+    # as the default (compared by value)
+    sheet = _sheet(
+        tmp_path,
+        'part = "P"\n[gyro]\nrandom_walk = { value = 2.0, unit = "rad/s/sqrt(Hz)", '
+        'kind = "typical" }\nbias_instability = { value = 2.0, unit = "rad/s", kind = "max" }\n',
+    )
+    typical, top = sheet.get("gyro", "random_walk"), sheet.get("gyro", "bias_instability")
+    at = _units([1.0, 2.0, 3.0])
+    assert term_stats("gyro_x", "random_walk", "u", at, typical).population_pass is True
+    # a maximum over the upper tolerance end fails, under it passes
+    tight = [UnitTerm(f"u{i}", v, v, v) for i, v in enumerate((1.0, 1.01, 1.02, 0.99))]
+    st = term_stats("gyro_x", "bias_instability", "u", tight, top)
+    assert st.tolerance[1] < 2.0 and st.population_pass is True
+    # one unit: at the maximum passes, above it fails
+    one = [UnitTerm("u", 2.0, 1.0, 3.0)]
+    assert term_stats("gyro_x", "bias_instability", "u", one, top).population_pass is True
+    over = [UnitTerm("u", 2.5, 1.0, 3.0)]
+    assert term_stats("gyro_x", "bias_instability", "u", over, top).population_pass is False
+    under = [UnitTerm("u", 1.5, 1.0, 3.0)]
+    assert term_stats("gyro_x", "bias_instability", "u", under, top).population_pass is True
+    # a median range from the typical value up is undecided: [2, 2, 4] and [2, 3, 4]
+    above = [*_units([2.0, 4.0]), UnitTerm("b", None, None, 3.0)]
+    st = term_stats("gyro_x", "random_walk", "u", above, typical)
+    assert (st.median_range, st.population_pass) == ((2.0, 3.0), None)
+    # a unit fails only when its whole interval is above the value, not from its edge on
+    edge = [*_units([1.0, 1.1, 1.2]), UnitTerm("edge", 3.0, 2.0, 4.0)]
+    assert term_stats("gyro_x", "random_walk", "u", edge, typical).failing_units == ()
+    # every unit only bounds it: a maximum between the bounds is undecided, not failed
+    bounded = [UnitTerm("b0", None, None, 0.3), UnitTerm("b1", None, None, 0.7)]
+    half = _sheet(
+        tmp_path,
+        'part = "P"\n[gyro]\nbias_instability = { value = 0.5, unit = "rad/s", kind = "max" }\n',
+    ).get("gyro", "bias_instability")
+    assert term_stats("gyro_x", "bias_instability", "u", bounded, half).population_pass is None
+
+
+def test_spread_of_two_units_and_outliers_with_as_many_bounded_as_resolved():
+    two = term_stats("gyro_x", "random_walk", "u", _units([2.0, 4.0]))
+    assert two.robust_spread == pytest.approx(1.4826 * 1.0 / 3.0)
+    # four resolved, four bounded: the lot's tolerance interval is that of the resolved units,
+    # and a unit far outside it is named
+    far = [*_units([2.0, 2.2, 2.4, 2.6]), UnitTerm("far", 2e3, 1.9e3, 2.1e3)]
+    bounded = [UnitTerm(f"c{k}", None, None, 3.0) for k in range(5)]
+    assert term_stats("gyro_x", "random_walk", "u", far + bounded).outliers == ("far",)
 
 
 @pytest.mark.parametrize(
