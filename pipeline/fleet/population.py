@@ -75,7 +75,8 @@ class TermStats:
     equal, else None and ``median_range`` = (low, high).  This matters most when few units
     resolve the term: those are the ones whose noise lifted it above their bound (120 units of
     2 min: B "resolved" on 2, their median 3× the true B), and the range is [0, bound).
-    ``robust_spread`` is given only when every unit resolves the term."""
+    ``robust_spread`` likewise: given when the median is and the bounded units' possible
+    deviations from it do not move the MAD."""
 
     axis: str
     term: str
@@ -171,6 +172,22 @@ def _bounded_order_interval(
     return (float(low), float(high)), BOUNDED_ORDER_METHOD
 
 
+def _robust_spread(values: Sequence[float], bounds: Sequence[float], median: float) -> float | None:
+    """1.4826 · MAD / ``median`` of the lot (fraction), or None when the units that only bound
+    the term (at most ``bounds``) could move the MAD.  A unit in [0, b] is |x − median| from the
+    median: between median − b and median when b ≤ median, between 0 and max(median, b −
+    median) otherwise; the MAD with every such unit at its least and at its most deviation
+    brackets the lot's."""
+    dev = np.abs(np.asarray(values, dtype=float) - median)
+    b = np.asarray(bounds, dtype=float)
+    least = np.where(b <= median, median - b, 0.0)
+    most = np.where(b <= median, median, np.maximum(median, b - median))
+    mad = float(np.median(np.concatenate((dev, least))))
+    if mad != float(np.median(np.concatenate((dev, most)))):
+        return None
+    return MAD_TO_SIGMA * mad / median
+
+
 def _verdict_of_range(low: float, high: float, limit: float) -> bool | None:
     """Pass when a quantity known to lie in [``low``, ``high``] is at most ``limit``, fail when
     it exceeds it, None when the range straddles it."""
@@ -228,11 +245,7 @@ def term_stats(
     high = float(np.median(values + bounds)) if counted else None
     median = low if low == high else None
     median_range = None if low == high else (low, high)
-    spread = (
-        float(MAD_TO_SIGMA * np.median(np.abs(np.asarray(values) - median)) / median)
-        if len(values) >= 2 and not bounds
-        else None
-    )
+    spread = _robust_spread(values, bounds, median) if median and len(values) >= 2 else None
     ti = tolerance_interval(values) if not bounds else _bounded_order_interval(values, bounds)
     population_pass, failing = None, ()
     if datasheet is not None and counted:

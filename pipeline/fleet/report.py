@@ -238,9 +238,9 @@ def fleet_markdown(
         "Final IEEE 952 terms (after the closed loop where it ran) in the paper's units. "
         "resolved: units whose term was resolved / units analysed. A unit that only bounds a term "
         "is counted anywhere between 0 and its bound: where that moves the median, the median "
-        "column gives the range it lies in (≤ the high end when the low end is 0); the spread, "
-        "and below 93 units the tolerance interval, need every unit's value and are not given "
-        "then. spread: 1.4826·MAD/median. "
+        "column gives the range it lies in (≤ the high end when the low end is 0); the spread "
+        "only where neither the median nor the MAD can move, and below 93 units no tolerance "
+        "interval (it needs every unit's value). spread: 1.4826·MAD/median. "
         f"Tolerance interval: holds {COVERAGE:.0%} of units with {CONFIDENCE:.0%} confidence, "
         f"by {'; '.join(methods) or '—'}. Outliers: units whose own 95 % interval lies outside "
         "the other units' tolerance interval.",

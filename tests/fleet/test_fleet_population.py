@@ -198,7 +198,14 @@ def test_units_that_only_bound_a_term_give_the_range_the_median_lies_in(tmp_path
     assert st.robust_spread is None and st.tolerance is None  # Howe's needs every value
     # bounds under the median do not move it: [0, 2, 4, 5, 6] and [0.5, 2, 4, 5, 6] -> 4.0
     low = [*_units([2.0, 4.0, 5.0, 6.0]), UnitTerm("b", None, None, 0.5)]
-    assert (term_stats("gyro_x", "bias_instability", "u", low).median,) == (4.0,)
+    st = term_stats("gyro_x", "bias_instability", "u", low)
+    assert st.median == 4.0
+    # nor the MAD: deviations 2, 0, 1, 2 and the bounded unit's 3.5 to 4 -> 2.0 either way
+    assert st.robust_spread == pytest.approx(1.4826 * 2.0 / 4.0)
+    # a bound above the median (4) puts that unit 0 to 6 from it: the MAD is 0 or 3, unknown
+    wide = [*_units([1.0, 4.0, 4.0, 9.0]), UnitTerm("b", None, None, 10.0)]
+    st = term_stats("gyro_x", "bias_instability", "u", wide)
+    assert (st.median, st.robust_spread) == (4.0, None)
     # one resolved unit has no spread (its MAD of 0 is not a spread of 0 %)
     one = term_stats("gyro_x", "bias_instability", "u", _units([2.0]))
     assert (one.median, one.robust_spread, one.tolerance) == (2.0, None, None)
