@@ -23,9 +23,10 @@ For each (axis, term) over the units whose term is resolved:
 
 Units that only bound a term (an upper bound: a rate random walk, or B on short records) are
 counted anywhere between 0 and their bound.  The median is given when that does not move it;
-otherwise the range it lies in (:class:`TermStats`).  The spread and Howe's interval need every
-unit's value and are left out; the distribution-free interval counts those units at 0 for its
-lower end and at their bound for its upper one.  When fewer units resolve the term than only
+otherwise the range it lies in (:class:`TermStats`).  The spread likewise, where the MAD
+cannot move either; Howe's interval needs every unit's value and is left out; the
+distribution-free interval counts those units at 0 for its lower end and at their bound for its
+upper one.  When fewer units resolve the term than only
 bound it, no unit is called an outlier of it; the datasheet verdicts follow the ranges.
 """
 
@@ -174,16 +175,15 @@ def _bounded_order_interval(
 
 def _robust_spread(values: Sequence[float], bounds: Sequence[float], median: float) -> float | None:
     """1.4826 · MAD / ``median`` of the lot (fraction), or None when the units that only bound
-    the term (at most ``bounds``) could move the MAD.  A unit in [0, b] is |x − median| from the
-    median: between median − b and median when b ≤ median, between 0 and max(median, b −
-    median) otherwise; the MAD with every such unit at its least and at its most deviation
-    brackets the lot's."""
+    the term (at most ``bounds``) could move the MAD.  A unit in [0, b] is at least
+    max(median − b, 0) from the median and, for the MAD, at most the median: a farther one
+    (x > 2·median) cannot move it, since on values ≥ 0 more than half the lot lies in
+    [0, 2·median] and the MAD is at most the median.  The MAD with every such unit at its least
+    and at its most deviation brackets the lot's."""
     dev = np.abs(np.asarray(values, dtype=float) - median)
-    b = np.asarray(bounds, dtype=float)
-    least = np.where(b <= median, median - b, 0.0)
-    most = np.where(b <= median, median, np.maximum(median, b - median))
+    least = np.maximum(median - np.asarray(bounds, dtype=float), 0.0)
     mad = float(np.median(np.concatenate((dev, least))))
-    if mad != float(np.median(np.concatenate((dev, most)))):
+    if mad != float(np.median(np.concatenate((dev, np.full(len(bounds), median))))):
         return None
     return MAD_TO_SIGMA * mad / median
 

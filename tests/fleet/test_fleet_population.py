@@ -3,6 +3,7 @@ the Markdown escaping of untrusted names."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -324,6 +325,36 @@ def test_population_verdicts_at_their_boundaries(tmp_path):
         'part = "P"\n[gyro]\nbias_instability = { value = 0.5, unit = "rad/s", kind = "max" }\n',
     ).get("gyro", "bias_instability")
     assert term_stats("gyro_x", "bias_instability", "u", bounded, half).population_pass is None
+
+
+def test_the_spread_with_bounded_units_is_the_mad_of_every_lot_they_allow():
+    # brute force: each bounded unit anywhere on a grid of [0, b] holding 0, b and the median
+    # (where |x - median| has its extremes); the spread is given exactly when every such lot
+    # has the same MAD, and is then that MAD
+    rng = np.random.default_rng(26)
+    given = unknown = 0
+    for _ in range(400):
+        values = [float(v) for v in rng.integers(1, 10, rng.integers(3, 8))]
+        bounds = [
+            float(b) for b in rng.choice([0.5, 2.0, 4.0, 5.0, 7.0, 12.0, 20.0], rng.integers(1, 3))
+        ]
+        units = [*_units(values), *(UnitTerm(f"b{k}", None, None, b) for k, b in enumerate(bounds))]
+        st = term_stats("gyro_x", "random_walk", "u", units)
+        if st.median is None:
+            continue
+        grids = [np.unique(np.r_[np.linspace(0, b, 9), min(b, st.median)]) for b in bounds]
+        mads = set()
+        for xs in itertools.product(*grids):
+            lot = np.array([*values, *xs])
+            assert np.median(lot) == st.median
+            mads.add(float(np.median(np.abs(lot - st.median))))
+        if len(mads) == 1:
+            given += 1
+            assert st.robust_spread == pytest.approx(1.4826 * mads.pop() / st.median, rel=1e-12)
+        else:
+            unknown += 1
+            assert st.robust_spread is None
+    assert given > 30 and unknown > 30  # both outcomes exercised
 
 
 def test_spread_of_two_units_and_outliers_with_as_many_bounded_as_resolved():
