@@ -23,6 +23,7 @@ from typing import Annotated, NoReturn
 
 import typer
 
+from imupipe import stopping
 from imupipe.errors import ImupipeError
 from imupipe.escape import printable
 from imupipe.report.exports import FORMATS, ExportOptions, check_options, write_exports
@@ -517,23 +518,13 @@ def demo(
     analyze(path=mcap_path, out=out / "adis16364.imupipe", quiet=quiet)
 
 
-class _Stopped(BaseException):
-    """SIGINT, SIGTERM or SIGHUP arrived: unwinds like Ctrl-C (a staged output is removed), but
-    past typer, which turns a KeyboardInterrupt into a silent exit 130."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signum)
-        self.signum = signum
-
-
-def _stop(signum: int, frame: object) -> None:
-    raise _Stopped(signum)
-
-
 def main() -> None:
     """Console entry point: one-line errors, exit 2 for bad input; SIGINT, SIGTERM and SIGHUP
     end a command with one line and 128 + the signal (``record`` finishes its file first)."""
-    previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    previous = {
+        s: signal.signal(s, stopping.request)
+        for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    }
     try:
         _run()
     finally:
@@ -544,7 +535,7 @@ def main() -> None:
 def _run() -> None:
     try:
         code = app(standalone_mode=False)  # typer.Exit(n) comes back as n here
-    except _Stopped as stop:
+    except stopping.Stopped as stop:
         name = signal.Signals(stop.signum).name
         said = "interrupted" if stop.signum == signal.SIGINT else f"stopped by {name}"
         typer.echo(f"imupipe: {said}", err=True)

@@ -658,3 +658,34 @@ def test_a_temperature_topic_by_frame_id_or_by_choice(tmp_path: Path, cli) -> No
     code, _, err = cli(analyze_args(path, tmp_path / "o2", "--temperature-topic", "/no"))
     one_error_line(code, err, "--temperature-topic '/no' is not a Temperature topic")
     assert "(Temperature topics: /battery/temperature)" in err
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # the swallowed stop
+def test_a_stop_whose_exception_python_swallowed_still_keeps_the_old_output(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """SIGTERM landing in a weak-reference callback (importlib's module lock, seen in CI): Python
+    prints "Exception ignored" and goes on, and the run used to finish, replace the output and
+    exit 0. The stop is remembered and raised before the output is put in place."""
+    import weakref
+
+    from imupipe import stopping
+    from imupipe.report.staging import staged_output
+
+    monkeypatch.setattr(stopping, "_requested", None)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report.json").write_text("old")
+
+    class Thing:
+        pass
+
+    with pytest.raises(stopping.Stopped) as stop, staged_output(out) as tmp:
+        (tmp / "report.json").write_text("new")
+        thing = Thing()
+        ref = weakref.ref(thing, lambda _: stopping.request(signal.SIGTERM, None))
+        del thing  # the callback runs here; its Stopped is printed and swallowed
+        assert stopping._requested == signal.SIGTERM and ref() is None
+    assert stop.value.signum == signal.SIGTERM
+    assert (out / "report.json").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # the staged folder is gone

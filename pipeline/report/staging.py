@@ -25,6 +25,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+from imupipe import stopping
 from imupipe.errors import OutputError
 
 OUTPUT_SUFFIXES = frozenset({".json", ".md", ".png", ".parquet", ".yaml", ".rrd"})
@@ -126,6 +127,7 @@ def staged_output(out: Path) -> Iterator[Path]:
         raise OutputError(f"--out {out}: cannot write beside it ({exc.strerror})") from None
     try:
         yield tmp
+        stopping.raise_if_requested()  # a stop whose exception was lost
         tmp.chmod(0o777 & ~_umask())
         _put_in_place(tmp, out)
     except BaseException:
