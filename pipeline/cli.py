@@ -521,10 +521,7 @@ def demo(
 def main() -> None:
     """Console entry point: one-line errors, exit 2 for bad input; SIGINT, SIGTERM and SIGHUP
     end a command with one line and 128 + the signal (``record`` finishes its file first)."""
-    previous = {
-        s: signal.signal(s, stopping.request)
-        for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-    }
+    previous = stopping.install((signal.SIGINT, signal.SIGTERM, signal.SIGHUP))
     try:
         _run()
     finally:

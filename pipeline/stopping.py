@@ -11,6 +11,8 @@ finish and replace the output.  So the handler also records the signal, and
 
 from __future__ import annotations
 
+import signal
+
 _requested: int | None = None
 
 
@@ -28,6 +30,14 @@ def request(signum: int, frame: object) -> None:
     global _requested
     _requested = signum
     raise Stopped(signum)
+
+
+def install(signals: tuple[int, ...]) -> dict[int, object]:
+    """Forget any earlier stop (a command run in the same process) and make :func:`request` the
+    handler of ``signals``; returns the previous handlers, for ``signal.signal`` to restore."""
+    global _requested
+    _requested = None
+    return {s: signal.signal(s, request) for s in signals}
 
 
 def raise_if_requested() -> None:

@@ -1,8 +1,8 @@
 """The package's layering: no module imports a module of a higher floor, and no import cycle.
 
-Floors (issue 9): errors/vocab/units/progress/stopping/jit/pages and the package root = 0, device = 1,
-io/stats = 2, recording/model = 3, analysis = 4, report = 5, testing = 5.5 (may import anything
-below the API), api/cli/__main__ = 6.  Every import statement counts, also those inside
+Floors (issue 9): errors/vocab/units/progress/stopping/jit/pages and the package root = 0,
+device = 1, io/stats = 2, recording/model = 3, analysis = 4, report = 5, testing = 5.5 (may import
+anything below the API), api/cli/__main__ = 6.  Every import statement counts, also those inside
 functions and under ``if TYPE_CHECKING:`` (a deferred import is still a dependency), except
 the package root's lazy re-exports of the public API.  Every
 module is also imported, so that a module the walk misses cannot hide.
