@@ -689,3 +689,7 @@ def test_a_stop_whose_exception_python_swallowed_still_keeps_the_old_output(
     assert stop.value.signum == signal.SIGTERM
     assert (out / "report.json").read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # the staged folder is gone
+    # the next command in this process starts with no stop recorded
+    previous = stopping.install((signal.SIGUSR1,))
+    signal.signal(signal.SIGUSR1, previous[signal.SIGUSR1])
+    assert stopping._requested is None
