@@ -26,8 +26,8 @@ counted anywhere between 0 and their bound.  The median is given when that does 
 otherwise the range it lies in (:class:`TermStats`).  The spread likewise, where the MAD
 cannot move either; Howe's interval needs every unit's value and is left out; the
 distribution-free interval counts those units at 0 for its lower end and at their bound for its
-upper one.  When fewer units resolve the term than only
-bound it, no unit is called an outlier of it; the datasheet verdicts follow the ranges.
+upper one.  When fewer units resolve the term than only bound it, no unit is called an outlier
+of it; the datasheet verdicts follow the ranges.
 """
 
 from __future__ import annotations
