@@ -12,12 +12,22 @@ the sandwich factor); prints the share of records whose truth lies below ``lo`` 
 linear unbiased estimate from every τ of the curve with their full covariance (GLS) and the
 Cramér–Rao bound of any unbiased estimator from the record itself (:func:`whittle_crb`).
 
+``k_coverage``: records of N, B and a rate random walk K whose AVAR at T/2 is ``--k-share``
+times the flicker plateau (K visible at long τ), fitted as the analysis fits: K's estimate
+against the truth, how often it is resolved, and how often the truth lies above the upper end
+of its two-sided profile interval at several levels (nominal (1 − level)/2), the τ points counted
+as the fit counts them (the evidence weights; what the report's interval and the loop's slow
+effects read) and with their correlation (the sandwich factor).  The loop's slow effects are
+whitened with K at the upper end of its 68 % interval (``loop.SLOW_K_LEVEL``), designed to be
+below the truth on 16 % of axes.
+
 ``panel``: for every axis of a ``loop_validation.py --jsonl`` file, the chance that an
 efficient unbiased estimate of B (spread at the Cramér–Rao bound, Gaussian) lies within 15 %
 of the truth, summed over the panel, against the measured count.
 
     python benchmarks/interval_coverage.py coverage --records 200 --samples 262144
     python benchmarks/interval_coverage.py coverage --records 40 --samples 4320000 --b 0
+    python benchmarks/interval_coverage.py k_coverage --records 60 --hours 12 --n 3e-4
     python benchmarks/interval_coverage.py precision
     python benchmarks/interval_coverage.py panel long_clean.jsonl
 """
@@ -32,7 +42,7 @@ import numpy as np
 from scipy import stats
 
 from imupipe.model import ieee952
-from imupipe.stats.allan import allan_curves, tau_factors
+from imupipe.stats.allan import FIT_MIN_TERMS, allan_curves, tau_factors
 from imupipe.stats.avar_covariance import lag_sums
 
 TAU0 = 0.01
@@ -72,6 +82,52 @@ def coverage(records: int, samples: int, n_white: float, b_flicker: float) -> No
             f"below / {n_hi:.1f} % above; B {b_lo:.1f} % / {b_hi:.1f} %, "
             f"resolved {100 * resolved[correlated] / records:.0f} %"
         )
+
+
+K_LEVELS = (0.4, 0.68, 0.9, 0.95)
+"""Two-sided profile levels whose upper end ``k_coverage`` checks (0.68: the slow effects')."""
+
+
+def k_coverage(
+    records: int, hours: float, n_white: float, b_flicker: float, k_share: float
+) -> None:
+    """K's estimate and the truth above its interval's upper end, over ``records`` draws of
+    white N, flicker B (:func:`rate`) and a rate random walk K (a Wiener process of variance K² t,
+    AVAR K² τ / 3) with K² (T/2) / 3 = ``k_share`` × the flicker plateau (2 ln 2 / π) B²."""
+    samples = int(hours * 3600 / TAU0)
+    k_rrw = np.sqrt(3 * k_share * 2 * np.log(2) / np.pi * b_flicker**2 / (samples * TAU0 / 2))
+    m = tau_factors(samples, min_terms=FIT_MIN_TERMS)
+    j = ieee952.TERM_NAMES.index("rate_random_walk")
+    ratio, above = [], np.zeros((2, len(K_LEVELS)))
+    for seed in range(records):
+        rng = np.random.default_rng(seed)
+        y = rate(samples, rng, n_white, b_flicker)
+        y += np.cumsum(k_rrw * np.sqrt(TAU0) * rng.standard_normal(samples))
+        curve = allan_curves(y, TAU0, m)[0]
+        avar, tau = np.asarray(curve.adev) ** 2, np.asarray(curve.tau_s)
+        edf = ieee952.monotone_edf(curve.edf)
+        hi95 = ieee952.avar_upper(avar, edf)
+        fit = ieee952._start_fit(  # what fit_noise_terms fits, kept to profile other levels
+            tau, avar, edf, None, 0.999, True, ieee952.flicker_limit(hi95),
+            ieee952.long_tau_start(curve),
+        )[0]  # fmt: skip
+        rho = ieee952.fit_correlation(fit, TAU0, np.asarray(curve.n_terms))
+        ratio.append(fit.coef[j] / k_rrw**2)
+        for c, correlation in enumerate((None, rho)):
+            for i, level in enumerate(K_LEVELS):
+                hi = fit.profile_interval(avar, edf, j, level, correlation)[1]
+                above[c, i] += k_rrw**2 > hi
+    ratio = np.sqrt(np.array(ratio))
+    print(
+        f"{records} records of {hours:g} h, N {n_white:.3g}, B {b_flicker:.3g}, "
+        f"K {k_rrw:.3g} (AVAR at T/2 {k_share:g} x the flicker plateau): K fitted/true "
+        f"median {np.median(ratio):.2f}, resolved on {100 * np.mean(ratio > 0):.0f} %"
+    )
+    for c, how in enumerate(("evidence weights", "sandwich")):
+        print(f"  truth above the upper end ({how}): " + ", ".join(
+            f"{level:g}: {100 * above[c, i] / records:.1f} % (nominal {50 * (1 - level):.1f})"
+            for i, level in enumerate(K_LEVELS)
+        ))  # fmt: skip
 
 
 def whittle_crb(
@@ -177,12 +233,20 @@ def main() -> None:
     cov.add_argument("--samples", type=int, default=2**18)
     cov.add_argument("--n", type=float, default=PAPER_N, help="white rate N (rad/s/√Hz)")
     cov.add_argument("--b", type=float, default=PAPER_B, help="flicker B (rad/s); 0: none")
+    kcov = sub.add_parser("k_coverage")
+    kcov.add_argument("--records", type=int, default=60)
+    kcov.add_argument("--hours", type=float, default=12.0)
+    kcov.add_argument("--n", type=float, default=3e-4, help="white rate N (rad/s/√Hz)")
+    kcov.add_argument("--b", type=float, default=2e-5, help="flicker B (rad/s)")
+    kcov.add_argument("--k-share", type=float, default=10.0, help="K's AVAR at T/2 / plateau")
     sub.add_parser("precision")
     pan = sub.add_parser("panel")
     pan.add_argument("jsonl", type=Path, help="a loop_validation.py --jsonl file")
     args = ap.parse_args()
     if args.command == "coverage":
         coverage(args.records, args.samples, args.n, args.b)
+    elif args.command == "k_coverage":
+        k_coverage(args.records, args.hours, args.n, args.b, args.k_share)
     elif args.command == "panel":
         panel(args.jsonl)
     else:
