@@ -104,18 +104,13 @@ def k_coverage(
         y = rate(samples, rng, n_white, b_flicker)
         y += np.cumsum(k_rrw * np.sqrt(TAU0) * rng.standard_normal(samples))
         curve = allan_curves(y, TAU0, m)[0]
-        avar, tau = np.asarray(curve.adev) ** 2, np.asarray(curve.tau_s)
-        edf = ieee952.monotone_edf(curve.edf)
-        hi95 = ieee952.avar_upper(avar, edf)
-        fit = ieee952._start_fit(  # what fit_noise_terms fits, kept to profile other levels
-            tau, avar, edf, None, 0.999, True, ieee952.flicker_limit(hi95),
-            ieee952.long_tau_start(curve),
-        )[0]  # fmt: skip
+        done = ieee952.fit_curve(curve)  # what fit_noise_terms reports, profiled at other levels
+        fit = done.fit
         rho = ieee952.fit_correlation(fit, TAU0, np.asarray(curve.n_terms))
         ratio.append(fit.coef[j] / k_rrw**2)
         for c, correlation in enumerate((None, rho)):
             for i, level in enumerate(K_LEVELS):
-                hi = fit.profile_interval(avar, edf, j, level, correlation)[1]
+                hi = fit.profile_interval(done.avar, done.edf, j, level, correlation)[1]
                 above[c, i] += k_rrw**2 > hi
     ratio = np.sqrt(np.array(ratio))
     print(

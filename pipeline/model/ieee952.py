@@ -1049,6 +1049,33 @@ def monotone_edf(edf: np.ndarray) -> np.ndarray:
     return np.minimum.accumulate(np.asarray(edf, dtype=float))
 
 
+@dataclass(frozen=True)
+class CurveFit:
+    """The IEEE 952 fit of one Allan curve (:func:`fit_curve`) and what it read: ``avar`` (u²)
+    and ``edf`` (:func:`monotone_edf`) at every τ of the curve, ``avar_hi`` their 95 % upper
+    bounds (:func:`avar_upper`), ``note`` why the fit starts where it does."""
+
+    fit: CompositeFit
+    note: str
+    avar: np.ndarray
+    edf: np.ndarray
+    avar_hi: np.ndarray
+
+
+def fit_curve(curve: AllanCurve) -> CurveFit:
+    """The composite fit of ``curve`` that :func:`fit_noise_terms` reports: weights from
+    :func:`monotone_edf`, the start chosen by :func:`fit_start`, B kept possible
+    (:func:`flicker_limit`), every τ from :func:`long_tau_start` on read for the long-τ terms."""
+    avar = np.asarray(curve.adev, dtype=float) ** 2
+    tau = np.asarray(curve.tau_s, dtype=float)
+    edf = monotone_edf(curve.edf)
+    avar_hi = avar_upper(avar, edf)
+    fit, note = _start_fit(
+        tau, avar, edf, None, 0.999, True, flicker_limit(avar_hi), long_tau_start(curve)
+    )
+    return CurveFit(fit, note, avar, edf, avar_hi)
+
+
 def fit_noise_terms(
     curve: AllanCurve, sensor: Literal["gyro", "accel"], tau0_s: float, correlated: bool = True
 ) -> NoiseTerms:
@@ -1062,12 +1089,8 @@ def fit_noise_terms(
     (``correlated=False``: counted as independent, as before session 14 — for comparisons,
     ``benchmarks/interval_coverage.py``).
     """
-    avar = np.asarray(curve.adev, dtype=float) ** 2
-    tau = np.asarray(curve.tau_s, dtype=float)
-    edf = monotone_edf(curve.edf)
-    avar_hi = avar_upper(avar, edf)
-    fit, note = _start_fit(
-        tau, avar, edf, None, 0.999, True, flicker_limit(avar_hi), long_tau_start(curve)
-    )
+    done = fit_curve(curve)
     sampling = (tau0_s, np.asarray(curve.n_terms)) if correlated else None
-    return terms_from_fit(fit, avar, edf, sensor, note, avar_hi, sampling=sampling)
+    return terms_from_fit(
+        done.fit, done.avar, done.edf, sensor, done.note, done.avar_hi, sampling=sampling
+    )
