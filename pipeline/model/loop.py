@@ -304,11 +304,13 @@ class _State:
             frequency_intervals=self.frequency_intervals | ({name: interval} if interval else {}),
         )
 
-    def fit(self, ax: _Axis, possible_b: bool = False) -> ieee952.CompositeFit:
+    def fit(
+        self, ax: _Axis, possible_b: bool = False, rate_ramp: bool = True
+    ) -> ieee952.CompositeFit:
         """The composite fit of this state; ``possible_b``: with B held to a plateau under
         the curve (:func:`ieee952.flicker_limit`) — the reported model.  The loop's decisions
         use the free fit (the constraint would move part of an unmodelled effect's hump from
-        B into the candidate being judged)."""
+        B into the candidate being judged).  ``rate_ramp=False``: R held at 0."""
         limit = ieee952.flicker_limit(ax.avar_hi(self.avar)) if possible_b else np.inf
         return _fit(
             ax.tau,
@@ -320,13 +322,16 @@ class _State:
             self.n_nonlinear,
             limit,
             ax.dense_from,
+            rate_ramp,
         )
 
     def terms(self, ax: _Axis) -> ieee952.NoiseTerms:
         """The model of this state as reported: the IEEE 952 terms of its fit with B possible
-        (bounds capped by this state's curve) and the accepted AVAR effects."""
+        (bounds capped by this state's curve), R released only where the data ask for it
+        (:func:`ieee952.release_rate_ramp`), and the accepted AVAR effects."""
+        free, held = (self.fit(ax, True, rate_ramp) for rate_ramp in (True, False))
         return ieee952.terms_from_fit(
-            self.fit(ax, possible_b=True),
+            ieee952.release_rate_ramp(free, held),
             self.avar,
             ax.edf,
             ax.sig.sensor,
@@ -347,6 +352,7 @@ def _fit(
     n_nonlinear: int = 0,
     flicker_max: float = np.inf,
     dense_from: float = np.inf,
+    rate_ramp: bool = True,
 ) -> ieee952.CompositeFit:
     """Every fit of the loop follows :func:`ieee952.fit_noise_terms`: octave τ ≥ ``tau_min``
     (from :func:`ieee952.fit_start` on the baseline, fixed for the whole loop so that all
@@ -364,6 +370,7 @@ def _fit(
         prefilter=True,
         flicker_max=flicker_max,
         dense_from=dense_from,
+        rate_ramp=rate_ramp,
     )
 
 

@@ -89,9 +89,10 @@ def test_intervals_cover_the_truth_at_their_nominal_rate(synth_rate, paper_gyro)
 
 
 def test_short_white_record_leaves_rrw_unresolved(synth_rate, paper_gyro):
-    """K unresolved on 11 min of white noise; its upper bound is the K whose asymptote K²τ/3
-    touches the measured AVAR's 95 % upper bound avar·ν/χ²_ν(0.025) (scipy.stats) on the fitted
-    range (that cap is below the profile bound on this record)."""
+    """K unresolved on 11 min of white noise.  With R held at 0 its profile bound (2.66e-5) lies
+    under the cap, the K whose asymptote K²τ/3 touches the measured AVAR's 95 % upper bound
+    avar·ν/χ²_ν(0.025) (scipy.stats) on the fitted range (2.80e-5: the bound while R was free,
+    its profile letting R fall as K rises)."""
     from scipy.stats import chi2
 
     tau0, n = 0.01, 2**16
@@ -101,12 +102,13 @@ def test_short_white_record_leaves_rrw_unresolved(synth_rate, paper_gyro):
     assert terms.random_walk.lo < paper_gyro.n < terms.random_walk.hi
     k = terms.rate_random_walk
     assert k.value is None and k.lo is None
-    assert "asymptote reaches the measured deviation's upper confidence bound" in k.reason
+    assert k.reason.endswith("(profile likelihood)")
+    assert k.hi == pytest.approx(2.664e-5, rel=1e-3)
     edf = np.minimum.accumulate(curve.edf)
     avar_hi = curve.adev**2 * edf / chi2.ppf(0.025, edf)
     fitted = curve.tau_s >= terms.fit_tau_min_s
-    touch = np.max(k.hi**2 * curve.tau_s[fitted] / 3 / avar_hi[fitted])
-    assert touch == pytest.approx(1.0, rel=1e-9)
+    cap = np.sqrt(np.min(3 * avar_hi[fitted] / curve.tau_s[fitted]))
+    assert cap == pytest.approx(2.803e-5, rel=1e-3)
 
 
 def filtered_white_avar(h: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -272,7 +274,8 @@ def test_flicker_shape_grid_equals_single_cutoffs():
 
 
 def test_fit_noise_terms_is_fit_start_then_fit_composite(synth_rate, paper_gyro):
-    """The fit reused from the deletion test = fit_composite from fit_start's τ."""
+    """The fit reused from the deletion test = fit_composite from fit_start's τ, R held at 0
+    (white and flicker noise do not ask for a rate ramp)."""
     tau0, n = 0.01, 2**16
     y = synth_rate(n, tau0, np.random.default_rng(11), paper_gyro.n, paper_gyro.b)
     curve = allan_curves(y, tau0)[0]
@@ -282,16 +285,23 @@ def test_fit_noise_terms_is_fit_start_then_fit_composite(synth_rate, paper_gyro)
     avar_hi = ieee952.avar_upper(avar, edf)
     limit = ieee952.flicker_limit(avar_hi)
     tau_min, note = ieee952.fit_start(tau, avar, edf, flicker_max=limit)
-    fit = ieee952.fit_composite(tau, avar, edf, tau_min=tau_min, prefilter=True, flicker_max=limit)
+    policy = {"tau_min": tau_min, "prefilter": True, "flicker_max": limit}
+    free = ieee952.fit_composite(tau, avar, edf, **policy)
+    fit = ieee952.fit_composite(tau, avar, edf, **policy, rate_ramp=False)
+    assert fit.dof == free.dof + 1 and fit.coef[4] == 0.0
+    fit = ieee952.release_rate_ramp(free, fit)
+    assert fit.rate_ramp_fit is free
     sampling = (tau0, curve.n_terms)
     assert terms == ieee952.terms_from_fit(fit, avar, edf, "gyro", note, avar_hi, sampling=sampling)
     independent = ieee952.terms_from_fit(fit, avar, edf, "gyro", note, avar_hi)
     assert ieee952.fit_noise_terms(curve, "gyro", tau0, correlated=False) == independent
-    # the correlated τ points widen N's interval (c ≈ 1.9 in deviance, √c in width), not K's
+    # the correlated τ points widen N's interval (c ≈ 1.9 in deviance, √c in width), not the
+    # bound of a K the fit holds at 0, nor R's
     width = terms.random_walk.hi - terms.random_walk.lo
     naive = independent.random_walk.hi - independent.random_walk.lo
     assert width / naive == pytest.approx(1.397, abs=0.002)
-    assert terms.rate_random_walk == independent.rate_random_walk
+    assert fit.coef[3] == 0.0 and terms.rate_random_walk == independent.rate_random_walk
+    assert terms.rate_ramp == independent.rate_ramp
 
 
 CHI2_1DOF_95 = 3.841458820694124  # χ²₁ 95 % quantile (NIST/SEMATECH table: 3.841)

@@ -76,6 +76,34 @@ def test_an_unresolved_rate_random_walk_bound_covers_the_truth(synth_rate):
     assert k.hi / k_true == pytest.approx(1.374, abs=0.002)
 
 
+def test_a_rate_random_walk_is_not_read_as_a_rate_ramp(synth_rate):
+    """The paper's accel_z N and B with K's AVAR at T/2 ten times the flicker plateau (2.9 h at
+    100 Hz, seed 11).  With R free the fit reads the tail's rise as a ramp: K 0, its 95 % bound
+    0.96 × the truth.  The deviance falls by 2.38 with R, under χ²₁(0.90) = 2.71: R is held at 0
+    (reported as a bound from the fit with R free) and K comes out at 0.77 × the truth, its
+    interval (widened for the correlated τ points) holding it."""
+    tau0, n = 0.01, 2**20
+    b = 0.0013239
+    k_true = np.sqrt(3 * 10 * 2 * np.log(2) / np.pi * b**2 / (n * tau0 / 2))
+    y = synth_rate(n, tau0, np.random.default_rng(11), 0.0027459, b, k_true)
+    curve = allan_curves(y, tau0, tau_factors(n, min_terms=FIT_MIN_TERMS))[0]
+    done = ieee952.fit_curve(curve)
+    free = done.fit.rate_ramp_fit
+    assert free is not None and free.coef[3] == 0.0 and free.coef[4] > 0.0
+    assert np.sqrt(free.profile_interval(done.avar, done.edf, 3)[1]) / k_true == pytest.approx(
+        0.959, abs=0.001
+    )
+    assert free.deviance - done.fit.deviance == pytest.approx(-2.385, abs=0.001)
+    terms = ieee952.fit_noise_terms(curve, "accel", tau0)
+    k = terms.rate_random_walk
+    assert k.value / k_true == pytest.approx(0.771, abs=0.001)
+    assert k.lo / k_true == pytest.approx(0.307, abs=0.001)
+    assert k.hi / k_true == pytest.approx(1.295, abs=0.001)
+    r_bound = np.sqrt(free.profile_interval(done.avar, done.edf, 4)[1])
+    assert terms.rate_ramp.value is None and terms.rate_ramp.hi == pytest.approx(r_bound, rel=1e-9)
+    assert r_bound == pytest.approx(2.404e-6, rel=1e-3)
+
+
 def test_the_published_curve_is_the_t4_curve_bit_for_bit(paper_gyro):
     y = paper_gyro.rate(2**14, TAU0, np.random.default_rng(3))
     long = allan_curves(y, TAU0, tau_factors(y.size, min_terms=2))[0]
