@@ -304,6 +304,38 @@ def test_fit_noise_terms_is_fit_start_then_fit_composite(synth_rate, paper_gyro)
     assert terms.rate_ramp == independent.rate_ramp
 
 
+def _fit_with(deviance: float, dof: int) -> ieee952.CompositeFit:
+    """A composite fit that only states its deviance and residual degrees of freedom."""
+    design = ieee952.design_columns(np.array([1.0, 2.0]))
+    return ieee952.CompositeFit(
+        ieee952.TERM_NAMES, np.zeros(5), design, np.arange(2), deviance, dof, np.inf
+    )
+
+
+@pytest.mark.parametrize(
+    ("free_deviance", "held_deviance", "released"),
+    [
+        (10.0, 12.70, False),  # ΔD 2.70 < χ²₁(0.90) = 2.706 (φ = 1: D/dof 0.5)
+        (10.0, 12.72, True),
+        (40.0, 45.40, False),  # φ = D/dof = 2: ΔD 5.40 < 2 × 2.706
+        (40.0, 45.43, True),
+    ],
+)
+def test_r_is_released_when_the_deviance_falls_by_phi_chi2_1_at_90(
+    free_deviance: float, held_deviance: float, released: bool
+) -> None:
+    """R ≥ 0 on its boundary: the likelihood-ratio statistic is ½χ²₀ + ½χ²₁ under R = 0, so a
+    5 % test compares ΔD / φ with χ²₁(0.90) = 2.7055 (Self & Liang 1987), φ the free fit's
+    quasi-likelihood dispersion."""
+    free, held = _fit_with(free_deviance, 20), _fit_with(held_deviance, 21)
+    chosen = ieee952.release_rate_ramp(free, held)
+    assert (chosen is free) is released
+    assert chosen.rate_ramp_fit is (None if released else free)
+
+
+CHI2_1DOF_95 = 3.841458820694124
+
+
 CHI2_1DOF_95 = 3.841458820694124  # χ²₁ 95 % quantile (NIST/SEMATECH table: 3.841)
 
 
