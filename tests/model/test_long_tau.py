@@ -76,6 +76,14 @@ def test_an_unresolved_rate_random_walk_bound_covers_the_truth(synth_rate):
     assert k.hi / k_true == pytest.approx(1.374, abs=0.002)
 
 
+def wandering(synth_rate) -> tuple[np.ndarray, float]:
+    """The paper's accel_z N and B with K's AVAR at T/2 ten times the flicker plateau (2.9 h at
+    100 Hz, seed 11); returns (rate m/s², K m/s³/√Hz)."""
+    n, b = 2**20, 0.0013239
+    k_true = np.sqrt(3 * 10 * 2 * np.log(2) / np.pi * b**2 / (n * 0.01 / 2))
+    return synth_rate(n, 0.01, np.random.default_rng(11), 0.0027459, b, k_true), k_true
+
+
 def test_a_rate_random_walk_is_not_read_as_a_rate_ramp(synth_rate):
     """The paper's accel_z N and B with K's AVAR at T/2 ten times the flicker plateau (2.9 h at
     100 Hz, seed 11).  With R free the fit reads the tail's rise as a ramp: K 0, its 95 % bound
@@ -83,9 +91,7 @@ def test_a_rate_random_walk_is_not_read_as_a_rate_ramp(synth_rate):
     (reported as a bound from the fit with R free) and K comes out at 0.77 × the truth, its
     interval (widened for the correlated τ points) holding it."""
     tau0, n = 0.01, 2**20
-    b = 0.0013239
-    k_true = np.sqrt(3 * 10 * 2 * np.log(2) / np.pi * b**2 / (n * tau0 / 2))
-    y = synth_rate(n, tau0, np.random.default_rng(11), 0.0027459, b, k_true)
+    y, k_true = wandering(synth_rate)
     curve = allan_curves(y, tau0, tau_factors(n, min_terms=FIT_MIN_TERMS))[0]
     done = ieee952.fit_curve(curve)
     free = done.fit.rate_ramp_fit
@@ -160,3 +166,16 @@ def test_the_loops_goodness_names_its_fitted_range_beyond_the_published_curve(pa
     for when in ("before", "after"):
         first, last = model[f"fit_tau_range_s_{when}"]
         assert first <= model[f"tau_max_abs_z_{when}"] <= last
+
+
+def test_the_loop_reports_the_model_fit_noise_terms_reports(synth_rate):
+    """The closed loop's model before any effect is the analysis' IEEE 952 fit, R held as
+    there (:func:`ieee952.release_rate_ramp`); on this clean record it accepts nothing."""
+    from imupipe.model.loop import AxisSignals, close_loop
+
+    y, k_true = wandering(synth_rate)
+    curve = allan_curves(y, 0.01, tau_factors(y.size, min_terms=FIT_MIN_TERMS))[0]
+    result = close_loop(AxisSignals("accel_z", "accel", y, 0.01, None, None), curve)
+    assert result.accepted == []
+    assert result.terms_before == ieee952.fit_noise_terms(curve, "accel", 0.01)
+    assert result.terms_after.rate_random_walk.value / k_true == pytest.approx(0.771, abs=0.001)
