@@ -777,10 +777,17 @@ def release_rate_ramp(free: CompositeFit, held: CompositeFit) -> CompositeFit:
     k_coverage``) K came out at a median 0.61 of the truth and above the upper end of its 68 %
     interval on 52 % of records instead of 16 %; with R released by this test (on 2 of the 60)
     at 0.74 and 33 % (with the sandwich factor, :data:`CORRELATED_TERMS`)."""
-    limit = free.dispersion * chi2_ppf_1dof(1.0 - 2.0 * RATE_RAMP_LEVEL)
-    if held.deviance - free.deviance > limit:
+    fall, limit = rate_ramp_test(free, held)
+    if fall > limit:
         return free
     return replace(held, rate_ramp_fit=free)
+
+
+def rate_ramp_test(free: CompositeFit, held: CompositeFit) -> tuple[float, float]:
+    """(ΔD, limit) of :func:`release_rate_ramp`'s test: how much the deviance falls with R
+    free, and φ·χ²₁(1 − 2·:data:`RATE_RAMP_LEVEL`) it must exceed."""
+    limit = free.dispersion * chi2_ppf_1dof(1.0 - 2.0 * RATE_RAMP_LEVEL)
+    return held.deviance - free.deviance, limit
 
 
 def fit_start(
@@ -1029,6 +1036,7 @@ def terms_from_fit(
         correlated = interval_correlation(fit, j, rho)
         profiled = fit.rate_ramp_fit if j == 4 and fit.rate_ramp_fit is not None else fit
         lo, hi_profile = profiled.profile_interval(avar, edf, j, correlation=correlated)
+        lo *= profiled is fit  # R held at 0 in the model is reported by its bound
         capped = caps[j] < hi_profile
         hi = min(hi_profile, caps[j])  # an unresolved term: at most what the curve allows
         if j == 0 and fit.short_sign < 0:
@@ -1059,6 +1067,12 @@ def terms_from_fit(
                 f"not resolved for {tau_lo:.4g} s <= tau <= {tau_hi:.4g} s: 95 % upper bound "
                 f"{np.sqrt(hi):.3g} {unit} ({how})"
             )
+            if profiled is not fit:
+                fall, limit = rate_ramp_test(profiled, fit)
+                reason += (
+                    f"; held at 0 in the model: with R fitted the deviance falls by {fall:.3g}, "
+                    f"under phi*chi2_1(0.90) = {limit:.3g} (likelihood-ratio test at 5 %)"
+                )
             if misfit:
                 reason += f"; {misfit}"
             terms[name] = NoiseTerm(None, None, float(np.sqrt(hi)), unit, reason)

@@ -107,6 +107,10 @@ def test_a_rate_random_walk_is_not_read_as_a_rate_ramp(synth_rate):
     assert k.hi / k_true == pytest.approx(1.295, abs=0.001)
     r_bound = np.sqrt(free.profile_interval(done.avar, done.edf, 4)[1])
     assert terms.rate_ramp.value is None and terms.rate_ramp.hi == pytest.approx(r_bound, rel=1e-9)
+    assert terms.rate_ramp.reason.endswith(
+        "held at 0 in the model: with R fitted the deviance falls by 2.39, under "
+        "phi*chi2_1(0.90) = 2.71 (likelihood-ratio test at 5 %)"
+    )
     assert r_bound == pytest.approx(2.404e-6, rel=1e-3)
 
 
