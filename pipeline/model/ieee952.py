@@ -1067,7 +1067,7 @@ def terms_from_fit(
                 f"not resolved for {tau_lo:.4g} s <= tau <= {tau_hi:.4g} s: 95 % upper bound "
                 f"{np.sqrt(hi):.3g} {unit} ({how})"
             )
-            if profiled is not fit:
+            if profiled is not fit and profiled.coef[j] > 0:  # the test held a fitted R at 0
                 fall, limit = rate_ramp_test(profiled, fit)
                 reason += (
                     f"; held at 0 in the model: with R fitted the deviance falls by {fall:.3g}, "

@@ -302,6 +302,8 @@ def test_fit_noise_terms_is_fit_start_then_fit_composite(synth_rate, paper_gyro)
     assert width / naive == pytest.approx(1.397, abs=0.002)
     assert fit.coef[3] == 0.0 and terms.rate_random_walk == independent.rate_random_walk
     assert terms.rate_ramp == independent.rate_ramp
+    # R at 0 with or without the test: its reason names no test that held it
+    assert free.coef[4] == 0.0 and "held at 0" not in terms.rate_ramp.reason
 
 
 def _fit_with(deviance: float, dof: int) -> ieee952.CompositeFit:
