@@ -110,9 +110,8 @@ def k_coverage(
         rho = ieee952.fit_correlation(fit, TAU0, np.asarray(curve.n_terms))
         ratio.append(fit.coef[j] / k_rrw**2)
         released += fit.rate_ramp_fit is None
-        free = fit if fit.rate_ramp_fit is None else fit.rate_ramp_fit
         reported = ieee952.interval_correlation(fit, j, rho)
-        for c, (read, correlation) in enumerate(((free, None), (fit, reported))):
+        for c, (read, correlation) in enumerate(((fit.with_rate_ramp, None), (fit, reported))):
             for i, level in enumerate(K_LEVELS):
                 hi = read.profile_interval(done.avar, done.edf, j, level, correlation)[1]
                 above[c, i] += k_rrw**2 > hi

@@ -465,6 +465,11 @@ class CompositeFit:
     # the fit with R free, kept here (:func:`release_rate_ramp`)
     rate_ramp_fit: CompositeFit | None = None
 
+    @property
+    def with_rate_ramp(self) -> CompositeFit:
+        """This fit with R free: itself, or the fit it holds R at 0 against."""
+        return self if self.rate_ramp_fit is None else self.rate_ramp_fit
+
     def nu(self, edf: np.ndarray) -> np.ndarray:
         """The gamma shapes ×2 the fit gives its points: ``edf`` at fit_index × weight."""
         nu = np.asarray(edf, dtype=float)[self.fit_index]
@@ -1034,9 +1039,10 @@ def terms_from_fit(
     terms, prefilter = {}, 0.0
     for j, (name, unit) in enumerate(zip(TERM_NAMES, TERM_UNITS[sensor], strict=True)):
         correlated = interval_correlation(fit, j, rho)
-        profiled = fit.rate_ramp_fit if j == 4 and fit.rate_ramp_fit is not None else fit
+        profiled = fit.with_rate_ramp if j == 4 else fit
         lo, hi_profile = profiled.profile_interval(avar, edf, j, correlation=correlated)
-        lo *= profiled is fit  # R held at 0 in the model is reported by its bound
+        if profiled is not fit:  # R held at 0 in the model is reported by its bound
+            lo = 0.0
         capped = caps[j] < hi_profile
         hi = min(hi_profile, caps[j])  # an unresolved term: at most what the curve allows
         if j == 0 and fit.short_sign < 0:
@@ -1071,7 +1077,8 @@ def terms_from_fit(
                 fall, limit = rate_ramp_test(profiled, fit)
                 reason += (
                     f"; held at 0 in the model: with R fitted the deviance falls by {fall:.3g}, "
-                    f"under phi*chi2_1(0.90) = {limit:.3g} (likelihood-ratio test at 5 %)"
+                    f"under phi*chi2_1({1 - 2 * RATE_RAMP_LEVEL:.2f}) = {limit:.3g} "
+                    f"(likelihood-ratio test at {100 * RATE_RAMP_LEVEL:g} %)"
                 )
             if misfit:
                 reason += f"; {misfit}"
