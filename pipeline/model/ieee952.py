@@ -1096,7 +1096,13 @@ def terms_from_fit(
             width = shape[1] if kind == "narrowband" else 0.0
             term = EffectTerm(kind, value, lo, hi, unit, shape[0], width, label=name)
         effects.append(term)
-    fit_note = "; ".join(t for t in (note, misfit or "model adequate on the fitted range") if t)
+    held = fit.rate_ramp_fit is not None and (
+        "rate ramp R held at 0 by the likelihood-ratio test: D/dof with one parameter fewer "
+        "than the closed loop's error, whose fits keep R free"
+    )
+    fit_note = "; ".join(
+        t for t in (note, held, misfit or "model adequate on the fitted range") if t
+    )
     return NoiseTerms(
         **terms,
         cutoff_hz=fit.cutoff_hz,

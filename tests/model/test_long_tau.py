@@ -112,6 +112,7 @@ def test_a_rate_random_walk_is_not_read_as_a_rate_ramp(synth_rate):
         "phi*chi2_1(0.90) = 2.71 (likelihood-ratio test at 5 %)"
     )
     assert r_bound == pytest.approx(2.404e-6, rel=1e-3)
+    assert "rate ramp R held at 0 by the likelihood-ratio test" in terms.fit_note
 
 
 def test_the_published_curve_is_the_t4_curve_bit_for_bit(paper_gyro):
@@ -147,6 +148,8 @@ def test_a_ramp_of_size_three_is_resolved_up_to_t2_not_at_t4(seed, paper_gyro):
     at_t2 = ieee952.fit_noise_terms(curve, "gyro", TAU0).rate_ramp
     assert at_t4.value is None and at_t4.hi > slope
     assert at_t2.value is not None and at_t2.lo < slope < at_t2.hi
+    t2_note = ieee952.fit_noise_terms(curve, "gyro", TAU0).fit_note
+    assert "R held at 0" not in t2_note  # released: the note names no test that held it
     assert at_t2.hi < at_t4.hi  # the points from T/4 to T/2 bound R more tightly
 
 
