@@ -33,6 +33,22 @@ def test_spike_candidate_finds_the_spikes_as_a_sparse_correction(spiky):
     assert effects.spike_candidate(clean, TAU0) is None
 
 
+def test_the_samples_beyond_the_limit_are_every_one_in_order_across_the_parts(monkeypatch):
+    """The spike search's pass over the whole deviation, in two parts on two threads: each
+    index with |dev| > limit exactly once, in order (the parts' first and last samples
+    included), and none where none is beyond."""
+    from imupipe import jit
+
+    monkeypatch.setattr(jit, "cores_here", lambda: 2)
+    dev = np.zeros(2 * jit.PART_MIN + 7, np.float32)
+    middle = dev.size // 2  # part 1's first sample
+    hits = [0, 17, middle - 1, middle, middle + 1, dev.size - 1]
+    dev[hits] = [3.0, -2.5, 2.01, -9.0, 4.0, 2.5]
+    dev[[1, 2]] = [2.0, -2.0]  # at the limit: not beyond
+    assert jit.parts(dev.size) == 2
+    assert effects._beyond_parts(dev, 2.0).tolist() == hits
+    assert effects._beyond_parts(dev, 9.0).size == 0
+
 def test_psd_line_with_correction_equals_corrected_copy(spiky):
     y, _ = spiky
     fix = effects.spike_candidate(y, TAU0).spikes
