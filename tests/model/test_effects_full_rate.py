@@ -49,6 +49,7 @@ def test_the_samples_beyond_the_limit_are_every_one_in_order_across_the_parts(mo
     assert effects._beyond_parts(dev, 2.0).tolist() == hits
     assert effects._beyond_parts(dev, 9.0).size == 0
 
+
 def test_psd_line_with_correction_equals_corrected_copy(spiky):
     y, _ = spiky
     fix = effects.spike_candidate(y, TAU0).spikes
