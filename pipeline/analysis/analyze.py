@@ -151,7 +151,7 @@ def axis_result(
     already made on this very ``y``, else it is made here)."""
     sensor = sensor_of(name)
     usable = None if excluded is None else ~excluded
-    found = spike_candidate(y, tau0_s) if searched is None else searched.found
+    found = spike_candidate(y, tau0_s, excluded) if searched is None else searched.found
     y, curve, outliers = excise_outliers(y, tau0_s, curve, excluded, found)
     signals = AxisSignals(
         name, sensor, y, tau0_s, temp_d, supply_d, excluded, spike_free=outliers is None
@@ -256,11 +256,10 @@ def find_axis_events(
     stuck, and each analysable axis' outlier search (the detector's input leaves them out)."""
 
     def first_pass(name: str) -> tuple[np.ndarray, OutlierSearch] | str:
-        y = axis(name)
+        y = series.on_grid(axis(name))  # excluded samples (NaN/inf frames, gaps) filled
         if why := unanalysable(y):
             return why
-        y = series.on_grid(y)
-        searched = OutlierSearch(spike_candidate(y, series.tau0_s))
+        searched = OutlierSearch(spike_candidate(y, series.tau0_s, series.excluded))
         return fine_means(y, series.tau0_s, searched.found), searched
 
     means: dict[str, np.ndarray] = {}
@@ -319,11 +318,10 @@ def analyze_axes(
             excluded = cut if excluded is None else excluded | cut
 
         def analyse(name: str) -> AxisResult | str:
-            y = axis(name)
+            y = series.on_grid(axis(name))
             why = stuck.get(name) or (None if found is not None else unanalysable(y))
             if why is not None:
                 return why
-            y = series.on_grid(y)
             filled = y if found is None else fill_excised(y, found)
             curve = allan_curves([filled], tau0, m, excluded=excluded)[0]
             kernels_ready()

@@ -819,7 +819,9 @@ def _beyond(dev: np.ndarray, limit: float) -> np.ndarray:  # pragma: no cover (J
     return out
 
 
-def spike_candidate(y: np.ndarray, tau0: float) -> Candidate | None:
+def spike_candidate(
+    y: np.ndarray, tau0: float, excluded: np.ndarray | None = None
+) -> Candidate | None:
     """Spikes: samples whose deviation from their block's median exceeds a threshold with a
     family-wise false-alarm rate of :data:`SPIKE_FALSE_ALARM` (Gaussian), knowing the LSB.
 
@@ -829,7 +831,9 @@ def spike_candidate(y: np.ndarray, tau0: float) -> Candidate | None:
     Quantisation: with an LSB q (:func:`imupipe.stats.robust.quantum`) a quantised deviation of
     k·q stands for a true one beyond (k − 1/2)·q, so the limit is z·scale + q/2 — the tail of
     coarsely quantised noise (e.g. 7 LSB at z·scale = 6.2 LSB) is not a spike.  The correction
-    replaces each spike by its block's median.
+    replaces each spike by its block's median.  ``excluded`` (bool, len(y)): samples the
+    analysis leaves out (gaps, NaN/inf frames and excised events, filled by a noise-free line
+    from their neighbours' means) are no spikes, whatever their fill.
     """
     y = kernel_input(y, np.float64)
     block = max(LEVEL_MIN_BLOCK, round(LEVEL_BLOCK_S / tau0))
@@ -843,6 +847,8 @@ def spike_candidate(y: np.ndarray, tau0: float) -> Candidate | None:
     thr = float(-special.ndtri(SPIKE_FALSE_ALARM / (2 * len(y))))  # norm.isf
     limit = thr * scale + lsb / 2
     idx = _beyond_parts(dev, limit)
+    if excluded is not None:
+        idx = idx[~excluded[idx]]
     if idx.size == 0:
         return None
     value = y[idx] - level[idx // min(block, y.size)]

@@ -530,7 +530,7 @@ class _Axis:
         full-rate pass; the series does not change between rounds): a fresh copy each call, as
         each round annotates its own candidate."""
         if not self._spikes_searched:
-            self._spikes = effects.spike_candidate(self.sig.y, self.sig.tau0)
+            self._spikes = effects.spike_candidate(self.sig.y, self.sig.tau0, self.sig.excluded)
             self._spikes_searched = True
         return copy.deepcopy(self._spikes)
 

@@ -116,9 +116,9 @@ def counted_searches(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     seen: list[int] = []
     search = orchestrator.spike_candidate
 
-    def spy(y, tau0):
+    def spy(y, tau0, excluded=None):
         seen.append(len(y))
-        return search(y, tau0)
+        return search(y, tau0, excluded)
 
     monkeypatch.setattr(orchestrator, "spike_candidate", spy)
     return seen

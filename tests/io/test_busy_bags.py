@@ -21,6 +21,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.typesys import get_types_from_msg
 
+import imupipe
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, message_definition
 from imupipe.io.decode import IMU_SCHEMA, decode
@@ -238,3 +239,24 @@ def test_imu_messages_lost_from_a_busy_bag_are_masked_on_the_grid(
     gapped = replace(imu, payloads=[imu.payloads[i] for i in kept], log_time=imu.log_time[kept])
     write_rosbag2(tmp_path / "bag", [gapped, *other_streams(seconds, camera=False, seed=5)])
     analysed_with_two_gaps(tmp_path / "bag", tmp_path / "out", n)
+
+
+def test_a_gapped_bag_with_awkward_values_drops_the_axes_beyond_float64_sums(
+    tmp_path: Path,
+) -> None:
+    """A bag that lost one IMU message is analysed on its grid, NaN/inf frames masked: an axis
+    whose usable frames reach 1.8e308 is still refused with its one-line warning (it crashed
+    the noise fit with an IndexError when the range check read the raw column, NaN included),
+    and the outlier search counts only the real outlier (accel_z's -2.2e-308 beside 9.8
+    m/s²), not the fills of the masked frames next to it."""
+    imu = imu_stream("/imu/data", 120.0, 100.0, seed=3)
+    kept = np.delete(np.arange(len(imu.payloads)), 7980)
+    gapped = replace(imu, payloads=[imu.payloads[i] for i in kept], log_time=imu.log_time[kept])
+    write_bag(tmp_path / "gapped.mcap", [gapped])
+    result = imupipe.analyze(tmp_path / "gapped.mcap", tmp_path / "out", rrd=False, figures=False)
+    assert list(result.axes) == ["gyro_x", "gyro_z", "accel_x", "accel_z"]
+    refused = "reaches 1.8e+308, beyond what float64 Allan sums hold (1e100): it is not analysed"
+    assert {f"gyro_y {refused}", f"accel_y {refused}"} <= set(result.input.warnings)
+    assert result.axes["accel_z"].outliers["count"] == 1
+    assert result.axes["accel_z"].outliers["max_size"] == pytest.approx(9.82, abs=0.01)
+    assert all(np.isfinite(a.terms.random_walk.value) for a in result.axes.values())
