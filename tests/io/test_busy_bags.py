@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap.writer import Writer
 from rosbags.rosbag2 import StoragePlugin
@@ -24,6 +26,7 @@ from rosbags.typesys import get_types_from_msg
 import imupipe
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, message_definition
+from imupipe.errors import ImupipeError
 from imupipe.io.decode import IMU_SCHEMA, decode
 from imupipe.io.mcap_scan import McapScanner
 from imupipe.testing.busy_bag import (
@@ -259,4 +262,56 @@ def test_a_gapped_bag_with_awkward_values_drops_the_axes_beyond_float64_sums(
     assert {f"gyro_y {refused}", f"accel_y {refused}"} <= set(result.input.warnings)
     assert result.axes["accel_z"].outliers["count"] == 1
     assert result.axes["accel_z"].outliers["max_size"] == pytest.approx(9.82, abs=0.01)
+    assert all(np.isfinite(a.terms.random_walk.value) for a in result.axes.values())
+
+
+@pytest.fixture(scope="module")
+def awkward_gapped_bag(tmp_path_factory: pytest.TempPathFactory) -> bytes:
+    """60 s of a robot's Imu at 100 Hz with the awkward values, one message lost, interleaved
+    with /tf, /odom and a temperature topic in 16 kB zstd chunks (the mcap library's writer)."""
+    imu = imu_stream("/imu/data", 60.0, 100.0, seed=6)
+    kept = np.delete(np.arange(len(imu.payloads)), 2500)
+    gapped = replace(imu, payloads=[imu.payloads[i] for i in kept], log_time=imu.log_time[kept])
+    path = tmp_path_factory.mktemp("awkward") / "bag.mcap"
+    write_bag(path, [gapped, *other_streams(60.0, camera=False, seed=7)], chunk_size=1 << 14)
+    return path.read_bytes()
+
+
+DAMAGE = st.one_of(
+    st.tuples(st.just("flip"), st.lists(st.tuples(st.floats(0, 1), st.integers(0, 7)), max_size=8)),
+    st.tuples(st.just("cut"), st.floats(0.05, 1.0)),
+    st.tuples(st.just("zero"), st.floats(0, 1), st.integers(1, 4000)),
+)
+
+
+@settings(
+    max_examples=12,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+@given(DAMAGE)
+def test_a_damaged_awkward_bag_is_analysed_or_refused_in_one_line(
+    tmp_path: Path, awkward_gapped_bag: bytes, damage: tuple
+) -> None:
+    """The whole analysis, loop included, of the awkward gapped bag with bits flipped, its tail
+    cut or a stretch zeroed: it returns (finite N on every analysed axis) or raises our
+    one-line ImupipeError — no other exception (the fuzzing that found the range check's
+    IndexError ran 650 such cases of five bags)."""
+    data = bytearray(awkward_gapped_bag)
+    if damage[0] == "flip":
+        for where, bit in damage[1]:
+            data[min(int(where * len(data)), len(data) - 1)] ^= 1 << bit
+    elif damage[0] == "cut":
+        data = data[: int(damage[1] * len(data))]
+    else:
+        start = int(damage[1] * len(data))
+        data[start : start + damage[2]] = bytes(len(data[start : start + damage[2]]))
+    path = tmp_path / "damaged.mcap"
+    path.write_bytes(bytes(data))
+    try:
+        result = imupipe.analyze(path, tmp_path / "out", rrd=False, figures=False)
+    except ImupipeError as exc:
+        assert "\n" not in str(exc)
+        return
     assert all(np.isfinite(a.terms.random_walk.value) for a in result.axes.values())
