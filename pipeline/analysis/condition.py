@@ -268,10 +268,16 @@ def rate_regimes(t: np.ndarray) -> list[tuple[int, int, float]]:
     """The parts of a recording at one sample rate: (first row, stop row, median step in s)
     each, in order; one part unless the block median step (:func:`_block_median_steps`) jumps
     by more than :data:`RATE_CHANGE` between neighbouring blocks and stays there for at least
-    two blocks (a rate switched from 200 to 100 Hz).  A slow drift of the rate is one part."""
+    two blocks (a rate switched from 200 to 100 Hz).  A slow drift of the rate is one part.
+    A block whose median step is not positive (stamps repeated or going back) tells no rate:
+    it takes its predecessor's (the first positive one's at the start), and the stamps
+    themselves are left to the segment cuts (:func:`condition`)."""
     medians = _block_median_steps(t)
-    if len(medians) < 4:
+    told = np.flatnonzero(medians > 0)
+    if len(medians) < 4 or not told.size:
         return [(0, len(t), float(np.median(np.diff(t))) if len(t) > 1 else np.nan)]
+    last_told = np.maximum.accumulate(np.where(medians > 0, np.arange(len(medians)), told[0]))
+    medians = medians[last_told]
     with np.errstate(divide="ignore", invalid="ignore"):
         jump = np.abs(np.log(medians[1:] / medians[:-1])) > np.log1p(RATE_CHANGE)
     lasting = jump.copy()

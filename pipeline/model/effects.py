@@ -174,7 +174,9 @@ class NoisePsd:
 
     ``white`` = N², ``flicker`` = B² (cut off above ``cutoff_hz``), ``rrw`` = K²,
     ``gauss_markov`` = ((σ², Tc), ...), ``lines`` = ((σ², centre Hz, width Hz), ...): spread
-    lines, the PSD of :func:`oscillator_avar`'s damped oscillator.
+    lines, the PSD of :func:`oscillator_avar`'s damped oscillator.  ``quantization`` = Q²
+    (u²·s²): white phase noise of AVAR 3Q²/τ², whose rate PSD (2πf)²·τ0·Q² needs the sample
+    interval; :meth:`at` leaves it out, :class:`Whitener` adds its exact covariance.
     """
 
     white: float
@@ -183,6 +185,7 @@ class NoisePsd:
     rrw: float
     gauss_markov: tuple[tuple[float, float], ...] = ()
     lines: tuple[tuple[float, float, float], ...] = ()
+    quantization: float = 0.0
 
     def at(self, f: np.ndarray) -> np.ndarray:
         w = 2 * np.pi * np.asarray(f, dtype=float)
@@ -237,6 +240,11 @@ class Whitener:
         fold = np.sum(coloured.at(np.abs(nu + images / self.span)) / (np.pi * (x + images)) ** 2, 0)
         s_diff = 4 * np.sin(np.pi * x) ** 2 * (psd.white + np.sin(np.pi * x) ** 2 * fold)
         gamma = np.fft.irfft(s_diff, grid)[:m] / self.span
+        # white phase noise e (variance Q²) in a block mean: (e_end − e_start)/D, so the
+        # differences (e_b − 2e_{b−1} + e_{b−2})/D have covariance Q²/D²·(6, −4, 1): what
+        # keeps a model whose short-τ curve is all 3Q²/τ² (a vibration line above the fitted
+        # range, N fitted 0) from a zero, unwhitenable covariance
+        gamma[:3] += psd.quantization / self.span**2 * np.array([6.0, -4.0, 1.0])[: min(m, 3)]
         # a nugget of NUGGET γ(0): a model without white noise (a baseline whose N went to 0
         # under a strong line's hump) has a band-limited spectrum whose Toeplitz covariance is
         # singular to rounding; its innovations' variances went negative (NaN errors)

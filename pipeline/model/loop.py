@@ -1040,8 +1040,9 @@ def noise_psd(fit: ieee952.CompositeFit, shapes: Shapes) -> effects.NoisePsd:
     """Rate PSD of a fitted composite model (IEEE 952 Annex C; see :class:`effects.NoisePsd`),
     with its Gauss–Markov and spread-line columns (σ² the column's coefficient).
 
-    Deterministic terms (rate ramp, sinusoid: nuisance regressors of :func:`time_domain_fit`),
-    the prefilter and quantisation (negligible on ~1 s block means) are left out.
+    Deterministic terms (rate ramp, sinusoid: nuisance regressors of :func:`time_domain_fit`)
+    and the prefilter (a negative 3/τ² column, ``short_sign`` −1) are left out; quantisation
+    (white phase noise, negligible on ~1 s block means beside N) is in, as Q².
     """
     coef = dict(zip(fit.names, fit.coef, strict=True))
     gm = tuple((coef[k], s[0]) for k, (kind, s) in shapes.items() if kind == "gauss_markov")
@@ -1053,6 +1054,7 @@ def noise_psd(fit: ieee952.CompositeFit, shapes: Shapes) -> effects.NoisePsd:
         coef["rate_random_walk"],
         gm,
         lines,
+        coef["quantization"] if fit.short_sign > 0 else 0.0,
     )
 
 

@@ -465,3 +465,18 @@ def test_mask_policy_long_gap_counter_must_agree_within_one_percent() -> None:
     s = condition(recording(stamp_ns=stamps, counter=counter), gaps="mask")
     assert s.samples == 1197
     np.testing.assert_array_equal(np.flatnonzero(s.excluded), np.arange(300, 498))
+
+
+def test_a_block_of_stamps_that_do_not_advance_is_no_rate() -> None:
+    """5000 stamps frozen inside a 100 Hz recording (a clock that stopped): whole blocks of 256
+    steps with a median step of 0.  They were taken for a part at a rate of its own, and the
+    rate-change warning divided by that step (ZeroDivisionError, found by fuzzing); they are
+    counted as duplicate stamps, with no rate of their own."""
+
+    def freeze(a):
+        a[3000:8000] = a[3000]
+
+    s = condition(recording(n=20_000, stamp_ns=freeze))
+    assert s.nominal_rate_hz == 100.0
+    assert not any("sample rate changes" in w for w in s.warnings)
+    assert s.counts["duplicate_stamps"] == 4999

@@ -493,3 +493,19 @@ def test_an_axis_reads_each_hann_periodogram_from_one_fft(base, paper_gyro, monk
     state.spikes = fix
     assert loop._line(ax, state, 2.0, 4.0) == fixed
     assert computed[2:] == [(N, TAU0, fix)]
+
+
+def test_a_quiet_sensor_under_a_line_above_the_fitted_range_closes_its_loop():
+    """2 min at 100 Hz of 1e-4 rad/s noise under a 31 Hz, 0.05 rad/s vibration: the Allan
+    curve is the line's 1/τ² envelope, fitted as quantisation with N, B and K at 0.  The
+    loop's whiteners then had a zero covariance (ZeroDivisionError in Levinson's recursion,
+    found by fuzzing); quantisation now enters them as white phase noise, and the loop runs
+    to its errors on both views."""
+    rng = np.random.default_rng(0)
+    n, tau0 = 12_000, 0.01
+    y = 1e-4 * rng.standard_normal(n) + 0.05 * np.sin(2 * np.pi * 31.0 * np.arange(n) * tau0)
+    curve = allan_curves([y], tau0)[0]
+    looped = close_loop(AxisSignals("gyro_x", "gyro", y, tau0, None, None), curve)
+    assert looped.terms_before.random_walk.value is None  # N: a bound (fitted 0)
+    assert looped.before.p_value == pytest.approx(1 / 201)  # rejected: the line is unmodelled
+    assert np.isfinite(looped.time_error_before) and looped.time_error_before > 0

@@ -139,8 +139,9 @@ def test_time_fit_log_det_is_that_of_the_coarse_differences_covariance() -> None
     comparable: under white rate noise N² the m differences of m + 1 independent coarse means
     of variance v = N²/D (D the coarse span) have det Σ = (m + 1) vᵐ; the whitened residual of
     white noise has error ≈ 1."""
-    names = ["random_walk", "bias_instability", "rate_random_walk"]
-    fit = SimpleNamespace(names=names, coef=[N_WHITE**2, 0.0, 0.0], cutoff_hz=np.inf)
+    names = ["quantization", "random_walk", "bias_instability", "rate_random_walk"]
+    coef = [0.0, N_WHITE**2, 0.0, 0.0]
+    fit = SimpleNamespace(names=names, coef=coef, cutoff_hz=np.inf, short_sign=1)
     y_d = N_WHITE * np.random.default_rng(3).standard_normal(4096)  # 1 s blocks: D = 4 s
     found = time_domain_fit(fit, {}, y_d, 1.0)
     m, v = 1023, N_WHITE**2 / 4.0

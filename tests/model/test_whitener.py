@@ -227,3 +227,29 @@ def test_an_axis_keeps_a_spectrum_while_its_series_is_the_same_object():
     assert ax.spectral(("line", 0.5), (y, fix), compute("f"))["tag"] == "f"  # dropped
     assert ax.spectral(("other", 1), (y, None), compute("g"))["tag"] == "o1"
     assert calls == ["a", "c", "d", *(f"o{k}" for k in range(loop.SPECTRA_KEPT)), "f"]
+
+
+Q2 = 4e-6  # quantisation Q² (rad)²: AVAR 3 Q² / τ²
+
+
+@pytest.mark.parametrize("masked", [False, True], ids=["levinson", "masked"])
+def test_quantisation_is_whitened_exactly_and_alone(masked: bool):
+    """White phase noise e (variance Q²) makes a block mean (e_end − e_start)/D: block means of
+    variance 2Q²/D² and lag-one covariance −Q²/D² (closed form, independent of the code's
+    (6, −4, 1) for their differences).  With white rate noise, and alone: a model whose
+    short-τ curve is all 3Q²/τ² (a quiet sensor under a vibration line above the fitted range)
+    had a zero covariance and a ZeroDivisionError."""
+    for white, tolerance in ((N2, 1e-5), (0.0, 1e-2)):  # alone: the unit roots' MA(2)
+        psd = effects.NoisePsd(white, 0.0, np.inf, 0.0, quantization=Q2)
+        whiten = effects.Whitener(psd, N_D, DT, _gapped() if masked else None)
+        n, span = N_D // whiten.factor, whiten.span
+        i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        means = np.where(i == j, white / span + 2 * Q2 / span**2, 0.0)
+        means -= np.where(np.abs(i - j) == 1, Q2 / span**2, 0.0)
+        blocks = whiten.blocks
+        between = np.zeros((len(blocks) - 1, n))
+        rows = np.arange(len(blocks) - 1)
+        between[rows, blocks[:-1]], between[rows, blocks[1:]] = -1.0, 1.0
+        cov = between @ means @ between.T
+        whitened = whiten.inv_chol @ cov @ whiten.inv_chol.T
+        assert np.abs(whitened - np.eye(len(whitened))).max() < tolerance
