@@ -187,6 +187,14 @@ class NoisePsd:
     lines: tuple[tuple[float, float, float], ...] = ()
     quantization: float = 0.0
 
+    @property
+    def silent(self) -> bool:
+        """No noise term at all (a fit whose curve is all deterministic columns: sinusoid,
+        ramp, a prefilter's negative 3/τ²): its covariance is zero and cannot whiten."""
+        terms = (self.white, self.flicker, self.rrw, self.quantization)
+        columns = [v for v, *_ in self.gauss_markov] + [v for v, *_ in self.lines]
+        return not any(terms) and not any(columns)
+
     def at(self, f: np.ndarray) -> np.ndarray:
         w = 2 * np.pi * np.asarray(f, dtype=float)
         with np.errstate(divide="ignore"):
@@ -629,7 +637,7 @@ def _slope(y: np.ndarray, x: np.ndarray) -> float:
     return float(x @ y / (x @ x))
 
 
-def step_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
+def step_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate | None:
     """Single bias step, located by the GLS matched filter over the coarse change points.
 
     The whitened difference of a step after coarse block k is column k of L⁻¹, so with the
@@ -639,14 +647,20 @@ def step_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
     k + 1 is seen partly by differences k and k + 1, so the grid resolves it to ±1 block);
     p-value Bonferroni-adjusted for the change points searched.  Across a gap (``whiten.blocks``
     skips coarse blocks) difference k spans the gap: a step there is placed at the first
-    observed block after it and its interval covers the whole gap.
+    observed block after it and its interval covers the whole gap.  None when no change point
+    lies in 5–95 % of the record (a handful of coarse blocks) or nothing but the drift is left
+    (constant block means).
     """
     yw = whiten(y_d)
     m = len(yw)
+    if not np.any((np.arange(m) >= 0.05 * m) & (np.arange(m) <= 0.95 * m)) or m < 3:
+        return None
     linv = whiten.inv_chol
     u = whiten.drift
     r = yw - u * _slope(yw, u)
     s2 = float(r @ r) / (m - 1)
+    if not s2 > 0:  # nothing left but the drift (constant block means): no step to test
+        return None
     prof = (r @ linv) ** 2 / ((linv**2).sum(axis=0) - (u @ linv) ** 2 / (u @ u)) / s2
     k = np.arange(m)
     inner = (k >= 0.05 * m) & (k <= 0.95 * m)

@@ -512,8 +512,20 @@ class _Axis:
         whitener costs an O(m³) Cholesky (~12 % of them were built twice on the real
         recordings)."""
         return self._whiteners.get(
-            psd, (), lambda: effects.Whitener(psd, len(self.y_d), self.dt, self.masked_d)
+            psd,
+            (),
+            lambda: effects.Whitener(self.audible(psd), len(self.y_d), self.dt, self.masked_d),
         )
+
+    def audible(self, psd: effects.NoisePsd) -> effects.NoisePsd:
+        """``psd``, or where it has no noise term at all (:attr:`effects.NoisePsd.silent`: a
+        fit whose curve is all sinusoid, ramp or prefilter columns, found by fuzzing) white
+        noise at the measured deviation of the block means (N² = AVAR(τ)·τ at the τ nearest
+        the block span): the covariance the data show there, where the model claims none."""
+        if not psd.silent:
+            return psd
+        i = int(np.argmin(np.abs(np.log(self.tau / self.dt))))
+        return replace(psd, white=float(self.avar[i] * self.tau[i]))
 
     def time_fit(self, fit: ieee952.CompositeFit, shapes: Shapes, y_d: np.ndarray) -> TimeFit:
         """:func:`time_domain_fit` of ``y_d`` (this axis' block means, maybe corrected) with

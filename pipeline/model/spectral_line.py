@@ -113,9 +113,11 @@ def line_centre(
     widths; then, on the ordinates within :data:`FINE_BAND` widths of it, the Whittle estimate
     of (centre, width) (Nelder–Mead) and the centre's profile interval — the width minimised
     (bounded, within a factor :data:`WIDTH_SPAN` of the estimate) at each centre, each edge found
-    by bracketing and Brent's root finder.  ``None`` when the band holds fewer than 8 ordinates.
+    by bracketing and Brent's root finder.  ``None`` when the band holds fewer than 8 ordinates,
+    or an ordinate of exactly 0 (a constant stretch of a series: its Whittle deviance is
+    infinite).
     """
-    if power.size < 8:
+    if power.size < 8 or not np.all(power > 0):
         return None
     coarse = [
         (c, w)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import signal, special
 
-from imupipe.model import effects, loop
+from imupipe.model import effects, loop, spectral_line
 from imupipe.model.loop import AxisSignals, close_loop
 from imupipe.stats.allan import allan_curves
 
@@ -509,3 +509,48 @@ def test_a_quiet_sensor_under_a_line_above_the_fitted_range_closes_its_loop():
     assert looped.terms_before.random_walk.value is None  # N: a bound (fitted 0)
     assert looped.before.p_value == pytest.approx(1 / 201)  # rejected: the line is unmodelled
     assert np.isfinite(looped.time_error_before) and looped.time_error_before > 0
+
+
+def test_a_tone_on_a_silent_sensor_is_found_and_its_loop_closes():
+    """A 5 rad/s tone at 4.7746 Hz over 1e-6 rad/s of noise (200 s at 100 Hz): every noise
+    term fits 0, so the model's PSD had no noise to whiten with (ZeroDivisionError, found by
+    fuzzing).  The whiteners take the block means' measured deviation as white noise there
+    (:meth:`loop._Axis.audible`), and the loop finds the line: its centre and rms."""
+    rng = np.random.default_rng(0)
+    n, tau0 = 20_000, 0.01
+    y = 1e-6 * rng.standard_normal(n) + 5.0 * np.sin(0.3 * np.arange(n))
+    looped = close_loop(
+        AxisSignals("gyro_x", "gyro", y, tau0, None, None), allan_curves([y], tau0)[0]
+    )
+    (line,) = looped.accepted
+    assert line.params["frequency_hz"] == pytest.approx(0.3 / (2 * np.pi * tau0), abs=1e-3)
+    assert line.params["rms"] == pytest.approx(5.0 / np.sqrt(2), rel=0.01)
+    assert np.isfinite(looped.time_error_before)
+
+
+def test_a_psd_with_no_noise_term_is_silent():
+    """Only a model with no noise term at all is silent: a Gauss–Markov or spread-line column
+    fitted 0 adds none, any fitted term does."""
+    silent = effects.NoisePsd(0.0, 0.0, np.inf, 0.0, ((0.0, 1.0),), ((0.0, 2.0, 0.1),))
+    assert silent.silent
+    for psd in (
+        effects.NoisePsd(1e-9, 0.0, np.inf, 0.0),
+        effects.NoisePsd(0.0, 1e-9, np.inf, 0.0),
+        effects.NoisePsd(0.0, 0.0, np.inf, 1e-9),
+        effects.NoisePsd(0.0, 0.0, np.inf, 0.0, quantization=1e-9),
+        effects.NoisePsd(0.0, 0.0, np.inf, 0.0, ((1e-9, 1.0),)),
+        effects.NoisePsd(0.0, 0.0, np.inf, 0.0, (), ((1e-9, 2.0, 0.1),)),
+    ):
+        assert not psd.silent
+
+
+def test_no_step_or_line_is_fitted_to_a_constant_series():
+    """Constant block means leave nothing but the drift for a step's GLS, and a constant stretch
+    gives periodogram ordinates of exactly 0 (infinite Whittle deviance): no candidate, no
+    division by zero."""
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, np.inf, 0.0), 2048, 1.0)
+    assert effects.step_candidate(np.full(2048, 3.0), 1.0, whiten) is None
+    freqs = np.linspace(1.0, 2.0, 64)
+    power = np.ones(64)
+    power[10] = 0.0
+    assert spectral_line.line_centre(freqs, power, 1.5, np.array([0.05])) is None
