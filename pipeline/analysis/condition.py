@@ -97,7 +97,11 @@ class ConditionedSeries:
     counts: dict[str, int] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     grid_index: np.ndarray | None = None
-    """Policy ``"mask"``: int64 (rows,) place of each row of the recording on the sample grid."""
+    """Policy ``"mask"``: int64 (rows,) place of each row on the sample grid, from row
+    ``grid_start`` of the recording on."""
+    grid_start: int = 0
+    """Policy ``"mask"``: the recording's first row on the grid (the first of the part at one
+    rate the analysis keeps, :func:`rate_regimes`)."""
     excluded: np.ndarray | None = None
     """Policy ``"mask"``: bool (grid samples,) True where no usable sample exists."""
 
@@ -113,9 +117,9 @@ class ConditionedSeries:
     @property
     def rows(self) -> slice:
         """The rows of the decoded frame to analyse: the chosen segment's, or (``"mask"``)
-        every row of the recording."""
+        every row of the recording's part at one rate."""
         if self.grid_index is not None:
-            return slice(0, len(self.grid_index))
+            return slice(self.grid_start, self.grid_start + len(self.grid_index))
         return slice(self.segment.start, self.segment.stop)
 
     @property
@@ -481,7 +485,7 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
     chosen = int(np.argmax([s.frames for s in segments]))
     seg = segments[chosen]
     if gaps in ("mask", "auto") and len(segments) > 1:
-        masked = _masked_series(rec, t, counter, period, bad_row, segments, chosen, counts)
+        masked = _masked_series(t, counter, period, bad_row, segments, chosen, counts, offset)
         longest_gap_s = None if masked is None else _longest_run(masked.excluded) * masked.tau0_s
         if masked is not None and (gaps == "mask" or longest_gap_s <= AUTO_MAX_GAP_S):
             return replace(masked, warnings=(*warnings, *masked.warnings))
@@ -533,7 +537,6 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
 
 
 def _masked_series(
-    rec: ImuRecording,
     t: np.ndarray,
     counter: np.ndarray | None,
     period: float,
@@ -541,10 +544,11 @@ def _masked_series(
     segments: list[Segment],
     chosen: int,
     counts: dict[str, int],
+    offset: int,
 ) -> ConditionedSeries | None:
-    """Policy ``"mask"``: the whole recording on its sample grid, or None if more than
-    :data:`MAX_MASKED_FRACTION` of the grid would be excluded."""
-    df = rec.frames
+    """Policy ``"mask"``: the whole recording (its part at one rate, from row ``offset``: the
+    rows of ``t``) on its sample grid, or None if more than :data:`MAX_MASKED_FRACTION` of the
+    grid would be excluded."""
     place, uncertain = _grid_places(t, counter, period)
     usable_row = ~(bad_row | uncertain)
     excluded = np.ones(int(place[-1]) + 1, dtype=bool)
@@ -556,7 +560,7 @@ def _masked_series(
     tau0 = float((t[last] - t[first]) / (place[last] - place[first]))
     counts["masked_samples"] = n_excluded
     counts["grid_samples"] = len(excluded)
-    warnings = [_mask_warning(len(excluded), n_excluded, df.height)]
+    warnings = [_mask_warning(len(excluded), n_excluded, len(t))]
     if abs(tau0 / period - 1) > 1e-3:
         warnings.append(
             f"measured mean rate {1 / tau0:.4f} Hz differs from the nominal {1 / period:g} Hz; "
@@ -570,5 +574,6 @@ def _masked_series(
         counts=counts,
         warnings=tuple(warnings),
         grid_index=place,
+        grid_start=offset,
         excluded=excluded,
     )

@@ -480,3 +480,33 @@ def test_a_block_of_stamps_that_do_not_advance_is_no_rate() -> None:
     assert s.nominal_rate_hz == 100.0
     assert not any("sample rate changes" in w for w in s.warnings)
     assert s.counts["duplicate_stamps"] == 4999
+
+
+def test_the_masked_grid_of_the_part_at_one_rate_reads_that_parts_rows() -> None:
+    """3000 frames at 200 Hz, then 12000 at 100 Hz that lost one frame: the 100 Hz part is kept
+    and, for its missing frame, analysed on its sample grid.  The grid's rows are that part's;
+    they were rows 0… of the recording (the 200 Hz part's, here 1000 rad/s on gyro_x, read as
+    if they were the 100 Hz part's: found by fuzzing, as NaN of the wrong rows)."""
+
+    def stamps(a):
+        a[:3000] = np.arange(3000) * 5_000_000
+        a[3000:] = a[2999] + 5_000_000 + np.arange(12_000) * 10_000_000
+        a[9000:] += 10_000_000  # one frame lost
+
+    def counter(a):
+        a[9000:] += 1
+
+    def first_part(a):
+        a[:3000] = 1000.0
+
+    rec = recording(n=15_000, stamp_ns=stamps, counter=counter, gyro_x=first_part)
+    rec = ImuRecording(rec.frames, rec.path, rec.topic, rec.source, rec.time_source, {})
+    s = condition(rec)
+    assert s.excluded is not None and s.excluded.sum() == 1  # the lost frame, masked
+    start = s.rows.start
+    assert 3000 <= start <= 3000 + 256 and s.rows.stop == 15_000
+    assert s.tau0_s == pytest.approx(0.01)
+    y = rec.frames["gyro_x"].to_numpy()
+    on_grid = s.on_grid(y[s.rows])
+    assert np.abs(on_grid).max() < 10  # no row of the 200 Hz part
+    np.testing.assert_array_equal(on_grid[:5], y[start : start + 5])
