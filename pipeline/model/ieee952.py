@@ -560,7 +560,8 @@ class CompositeFit:
             # profile), and the lesser deviance counts.
             nearest = min(solved, key=lambda done: abs(done[0] - c))[1]
             starts = (at_best,) if nearest is at_best else (at_best, nearest)
-            offset = c * x[:, j]
+            with np.errstate(invalid="ignore"):  # c = inf on an all-zero column: no bound
+                offset = c * x[:, j]
             coef, dev = min(
                 (fit_nonneg_gamma(others, a, nu, offset, start) for start in starts),
                 key=lambda fit: fit[1],
@@ -596,7 +597,8 @@ class CompositeFit:
             inner = c
         # upper end: 10 % steps up to 4x the fit (or from a tiny fraction of the data's
         # level), doubling beyond, until the deviance rises past the limit
-        tiny = 1e-6 * float(np.min(a / np.maximum(np.abs(x[:, j]), 1e-300)))
+        with np.errstate(over="ignore"):  # an all-zero column: inf, the search finds no end
+            tiny = 1e-6 * float(np.min(a / np.maximum(np.abs(x[:, j]), 1e-300)))
         inner, c = best, max(1.1 * best, tiny)
         for _ in range(400):
             if excess(c) > 0:
