@@ -522,9 +522,10 @@ class _Axis:
         fit whose curve is all sinusoid, ramp or prefilter columns, found by fuzzing) white
         noise at the measured deviation of the block means (N² = AVAR(τ)·τ at the τ nearest
         the block span): the covariance the data show there, where the model claims none."""
-        if not psd.silent:
+        measured = np.flatnonzero(self.avar > 0)  # NaN and 0 (a constant series) are no level
+        if not psd.silent or not measured.size:
             return psd
-        i = int(np.argmin(np.abs(np.log(self.tau / self.dt))))
+        i = measured[np.argmin(np.abs(np.log(self.tau[measured] / self.dt)))]
         return replace(psd, white=float(self.avar[i] * self.tau[i]))
 
     def time_fit(self, fit: ieee952.CompositeFit, shapes: Shapes, y_d: np.ndarray) -> TimeFit:

@@ -181,7 +181,7 @@ def _send_signals(
         offset = np.array([means[c] for c in names])
         for start in range(0, len(t_s), CHUNK_ROWS):
             stop = start + CHUNK_ROWS
-            with np.errstate(invalid="ignore"):  # inf - inf in a NaN/inf frame: NaN, no dot
+            with np.errstate(invalid="ignore"):  # inf - inf in a NaN/inf frame: NaN, silently
                 part = np.column_stack([y[start:stop] for y in ys]) - offset
             t_ns = np.round(t_s[start:stop] * 1e9).astype("timedelta64[ns]")
             rec.send_columns(
