@@ -648,15 +648,12 @@ def step_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate | 
     k + 1 is seen partly by differences k and k + 1, so the grid resolves it to ±1 block);
     p-value Bonferroni-adjusted for the change points searched.  Across a gap (``whiten.blocks``
     skips coarse blocks) difference k spans the gap: a step there is placed at the first
-    observed block after it and its interval covers the whole gap.  None when no change point
-    lies in 5–95 % of the record (a handful of coarse blocks) or nothing but the drift is left
-    (constant block means).
+    observed block after it and its interval covers the whole gap.  None with fewer than three
+    differences, or when nothing but the drift is left (constant block means).
     """
     yw = whiten(y_d)
     m = len(yw)
-    k = np.arange(m)
-    inner = (k >= 0.05 * m) & (k <= 0.95 * m)
-    if m < 3 or not inner.any():
+    if m < 3:
         return None
     linv = whiten.inv_chol
     u = whiten.drift
@@ -665,6 +662,8 @@ def step_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate | 
     if not s2 > 0:  # nothing left but the drift (constant block means): no step to test
         return None
     prof = (r @ linv) ** 2 / ((linv**2).sum(axis=0) - (u @ linv) ** 2 / (u @ u)) / s2
+    k = np.arange(m)
+    inner = (k >= 0.05 * m) & (k <= 0.95 * m)  # never empty from m = 2 on
     kb = int(k[inner][np.argmax(prof[inner])])
     ok = k[inner & (prof[kb] - prof <= CHI2_95)]
     span, blocks = whiten.span, whiten.blocks

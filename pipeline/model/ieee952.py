@@ -1150,8 +1150,11 @@ def fit_curve(curve: AllanCurve) -> CurveFit:
     tau = np.asarray(curve.tau_s, dtype=float)
     edf = monotone_edf(curve.edf)
     avar_hi = avar_upper(avar, edf)
-    policy = {"prefilter": True, "flicker_max": flicker_limit(avar_hi)}
-    policy["dense_from"] = long_tau_start(curve)
+    policy = {
+        "prefilter": True,
+        "flicker_max": flicker_limit(avar_hi),
+        "dense_from": long_tau_start(curve),
+    }
     fit, note = _start_fit(tau, avar, edf, None, 0.999, **policy)
     tau_min = float(tau[fit.fit_index[0]])
     held = fit_composite(tau, avar, edf, tau_min=tau_min, rate_ramp=False, **policy)
