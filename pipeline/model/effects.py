@@ -18,7 +18,9 @@ Two families (issue 4):
   sinusoid A·sin(2π f0 t):  A² sin⁴(π f0 τ) / (π f0 τ)²          (peak near τ = 0.371 / f0)
   first-order Gauss–Markov, variance σ², correlation time Tc:
   (2σ² Tc / τ) [1 − (Tc / 2τ)(3 − 4 e^{−τ/Tc} + e^{−2τ/Tc})]       (peak near τ = 1.89 Tc)
-  (IEEE Std 952-1997 Annex C; El-Sheimy, Hou & Niu, IEEE TIM 57(1), 2008, Table I).
+  (IEEE Std 952-1997 Annex C; El-Sheimy, Hou & Niu, IEEE TIM 57(1), 2008, Table I): the
+  continuous-time forms, the limit τ0 → 0 of the exact AVAR of the samples the columns use
+  (:func:`sinusoid_avar`, :func:`sampled_avar`).
 """
 
 from __future__ import annotations
@@ -61,16 +63,49 @@ def moving_average(x: np.ndarray, w: int) -> np.ndarray:
     return (c[hi] - c[lo]) / (hi - lo)
 
 
-def sinusoid_avar(tau: np.ndarray, f0: float) -> np.ndarray:
-    """AVAR of a unit-amplitude sinusoid of frequency ``f0`` (Hz) at ``tau`` (s)."""
-    x = np.pi * f0 * tau
-    return np.sin(x) ** 4 / x**2
+def sinusoid_avar(tau: np.ndarray, f0: float, tau0: float) -> np.ndarray:
+    """AVAR of a unit-amplitude sinusoid of frequency ``f0`` (Hz) sampled every ``tau0`` s, at
+    ``tau`` = m τ0 (s).
+
+    The mean of m samples of A sin(2π f0 t + φ) is a sinusoid of amplitude
+    A sin(π f0 m τ0) / (m sin(π f0 τ0)) (the Dirichlet kernel), and two adjacent means differ by
+    2 sin(π f0 τ) times that: σ²(τ) = A² sin⁴(π f0 τ) / (m sin(π f0 τ0))², averaged over φ.
+    As τ0 → 0 this is IEEE Std 952-1997 Annex C's A² sin⁴(π f0 τ) / (π f0 τ)²; sampled, that
+    continuous form reads the amplitude high by π f0 τ0 / sin(π f0 τ0): 18 % at 0.31 of the
+    sample rate, 43 % at 0.45.
+    """
+    tau = np.asarray(tau, dtype=float)
+    m = np.maximum(np.round(tau / tau0), 1.0)
+    return np.sin(np.pi * f0 * tau) ** 4 / (m * np.sin(np.pi * f0 * tau0)) ** 2
 
 
-def gauss_markov_avar(tau: np.ndarray, tc: float) -> np.ndarray:
-    """AVAR of a unit-variance first-order Gauss–Markov process with correlation time ``tc`` (s)."""
-    a = tau / tc
-    return 2 * tc / tau * (1 - (3 - 4 * np.exp(-a) + np.exp(-2 * a)) / (2 * a))
+def sampled_avar(tau: np.ndarray, tau0: float, s: complex, c: complex = 1.0) -> np.ndarray:
+    """AVAR at ``tau`` = m τ0 (s) of a unit-variance stationary rate of autocovariance
+    R(t) = Re[c e^{−s|t|}] (Re ``c`` = 1) sampled every ``tau0`` s.
+
+    The mean of m samples has variance V(m) = (m R(0) + 2 Σ_{k=1}^{m−1} (m − k) R(k τ0)) / m²
+    and σ²(m τ0) = 2 V(m) − 2 V(2m) (two adjacent means; as :func:`prefilter_avar`), the sum in
+    closed form with z = e^{−s τ0}: Σ_{k=1}^{m−1} (m − k) z^k = z (m (1 − z) − (1 − z^m)) /
+    (1 − z)².  Exact for the samples the Allan sums read, where the continuous-time integral
+    of IEEE Std 952-1997 Annex C (the limit τ0 → 0) is not: it misreads a line near the
+    Nyquist frequency and a correlation time of a few samples.
+    """
+    m = np.maximum(np.round(np.asarray(tau, dtype=float) / tau0), 1.0)
+    st = complex(s) * tau0
+    one_minus_z = -np.expm1(-st)
+
+    def var_mean(mm: np.ndarray) -> np.ndarray:
+        tail = np.exp(-st) * (mm * one_minus_z + np.expm1(-st * mm)) / one_minus_z**2
+        return (mm * np.real(c) + 2 * np.real(c * tail)) / mm**2
+
+    return 2 * var_mean(m) - 2 * var_mean(2 * m)
+
+
+def gauss_markov_avar(tau: np.ndarray, tc: float, tau0: float) -> np.ndarray:
+    """AVAR of a unit-variance first-order Gauss–Markov process with correlation time ``tc``
+    (s), R(t) = e^{−|t|/Tc}, sampled every ``tau0`` s, at ``tau`` (s) (:func:`sampled_avar`;
+    as τ0 → 0 the module doc's continuous form)."""
+    return sampled_avar(tau, tau0, 1.0 / tc)
 
 
 def oscillator_psd(f: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
@@ -83,34 +118,22 @@ def oscillator_psd(f: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
     return 4 * a * w0_sq / ((w0_sq - w_sq) ** 2 + 4 * a * a * w_sq)
 
 
-def oscillator_avar(tau: np.ndarray, f0: float, width_hz: float) -> np.ndarray:
+def oscillator_avar(tau: np.ndarray, f0: float, width_hz: float, tau0: float) -> np.ndarray:
     """AVAR of a unit-variance second-order Gauss–Markov process (a damped oscillator driven by
-    white noise: a spread spectral line) at ``tau`` (s).
+    white noise: a spread spectral line) sampled every ``tau0`` s, at ``tau`` (s).
 
     Autocovariance R(t) = e^{−a|t|} (cos ωd t + (a/ωd) sin ωd|t|), ωd = 2π ``f0`` (Hz), damping
     a = π ``width_hz`` (the line's full width at half power, Hz); its two-sided PSD is
     S(f) = 4aω0² / ((ω0² − ω²)² + 4a²ω²) at ω = 2πf (ω0² = ωd² + a²), the resonance of
     x'' + 2a x' + ω0² x = w
     (Papoulis, *Probability, Random Variables and Stochastic Processes*, §10; Maybeck, *Stochastic
-    Models* vol. 1, §4.10).  For a stationary rate with autocovariance R, averaging over τ and
-    differencing gives (Allan 1966; equal to 4∫ S(f) sin⁴(πfτ)/(πfτ)² df of IEEE Std 952-1997
-    Annex C)
-
-        σ²(τ) = (4 Φ(τ) − Φ(2τ)) / τ²,   Φ(τ) = ∫₀^τ (τ − t) R(t) dt,
-
-    and with R(t) = Re[c e^{−st}], s = a − iωd, c = 1 − i a/ωd, in closed form
-    Φ(τ) = Re[c (τ/s − (1 − e^{−sτ})/s²)].  ``width_hz`` → 0 gives a random-phase sinusoid of
-    variance 1 (:func:`sinusoid_avar` × 2).
+    Models* vol. 1, §4.10).  R(t) = Re[c e^{−st}] with s = a − iωd, c = 1 − i a/ωd, whose
+    sampled AVAR is :func:`sampled_avar` (the continuous limit, 4∫ S(f) sin⁴(πfτ)/(πfτ)² df of
+    IEEE Std 952-1997 Annex C, reads a line near the Nyquist frequency wrong).
+    ``width_hz`` → 0 gives a random-phase sinusoid of variance 1 (:func:`sinusoid_avar` × 2).
     """
-    tau = np.asarray(tau, dtype=float)
     a, wd = np.pi * width_hz, 2 * np.pi * f0
-    s = complex(a, -wd)
-    c = complex(1.0, -a / wd)
-
-    def phi(t: np.ndarray) -> np.ndarray:
-        return np.real(c * (t / s + np.expm1(-s * t) / s**2))
-
-    return (4 * phi(tau) - phi(2 * tau)) / tau**2
+    return sampled_avar(tau, tau0, complex(a, -wd), complex(1.0, -a / wd))
 
 
 PREFILTERS = ("moving_average", "bartlett", "first_order")

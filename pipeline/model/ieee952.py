@@ -880,25 +880,27 @@ class NoiseTerm:
     reason: str | None
 
 
-def effect_shape(kind: str, shape: tuple) -> np.ndarray | Callable[[np.ndarray], np.ndarray]:
+def effect_shape(kind: str, shape: tuple, tau0: float) -> Callable[[np.ndarray], np.ndarray]:
     """The AVAR column (per unit squared ``value``) of an effect of ``kind`` with ``shape``
-    parameters, as a function of τ (s) (:mod:`imupipe.model.effects`):
+    parameters in a series sampled every ``tau0`` s, as a function of τ (s)
+    (:mod:`imupipe.model.effects`; exact for the samples, not the continuous-time limit):
 
     * sinusoid (frequency Hz,): amplitude² · :func:`effects.sinusoid_avar`;
     * gauss_markov (Tc s,): σ² · :func:`effects.gauss_markov_avar`;
     * narrowband (centre Hz, line width Hz): σ² · :func:`effects.oscillator_avar`;
-    * prefilter (filter family, length s, τ0 s): N_f² · (:func:`effects.prefilter_avar` − 1/τ),
+    * prefilter (filter family, length s, the τ0 s it was searched at): N_f² ·
+      (:func:`effects.prefilter_avar` − 1/τ),
       the part of the white noise N² that passed the sensor's prefilter loses its short-τ
       variance (≤ 0; the IEEE 952 N² keeps the whole white level).
     """
     if kind == "sinusoid":
-        return partial(sinusoid_avar, f0=shape[0])
+        return partial(sinusoid_avar, f0=shape[0], tau0=tau0)
     if kind == "gauss_markov":
-        return partial(gauss_markov_avar, tc=shape[0])
+        return partial(gauss_markov_avar, tc=shape[0], tau0=tau0)
     if kind == "narrowband":
-        return partial(oscillator_avar, f0=shape[0], width_hz=shape[1])
+        return partial(oscillator_avar, f0=shape[0], width_hz=shape[1], tau0=tau0)
     if kind == "prefilter":
-        family, length_s, tau0 = shape
+        family, length_s, _ = shape
 
         def deficit(tau: np.ndarray) -> np.ndarray:
             return prefilter_avar(tau, tau0, family, length_s) - 1.0 / tau
@@ -913,8 +915,9 @@ class EffectTerm:
     ``value`` in ``unit``: a sinusoid (``value`` its amplitude, ``parameter`` its frequency, Hz),
     a Gauss–Markov process (σ; correlation time Tc, s), a narrowband vibration (σ, its rms;
     centre frequency, Hz, and ``width_hz``), or the sensor's prefilter (N_f, the filtered part
-    of the white noise; filter length, s, of the family ``filter``).  ``label``: its key in
-    report.json ``model.terms`` (the kind, numbered when a kind occurs more than once)."""
+    of the white noise; filter length, s, of the family ``filter``), in a series sampled every
+    ``tau0_s`` s.  ``label``: its key in report.json ``model.terms`` (the kind, numbered when a
+    kind occurs more than once)."""
 
     kind: str
     value: float
@@ -922,9 +925,9 @@ class EffectTerm:
     hi: float
     unit: str
     parameter: float
+    tau0_s: float
     width_hz: float = 0.0
     filter: str = ""
-    tau0_s: float = 0.0
     label: str = ""
 
     def avar(self, tau: np.ndarray) -> np.ndarray:
@@ -933,7 +936,8 @@ class EffectTerm:
             "narrowband": (self.parameter, self.width_hz),
             "prefilter": (self.filter, self.parameter, self.tau0_s),
         }.get(self.kind, (self.parameter,))
-        return self.value**2 * effect_shape(self.kind, shape)(np.asarray(tau, dtype=float))
+        tau = np.asarray(tau, dtype=float)
+        return self.value**2 * effect_shape(self.kind, shape, self.tau0_s)(tau)
 
     def as_model_term(self) -> dict:
         """The report.json ``model.terms`` entry: value, lo, hi, unit (and the shape: centre
@@ -1023,7 +1027,8 @@ def terms_from_fit(
     confidence bound at every τ; an upper bound (of an unresolved term, or of an interval) is
     then never one whose asymptote lies above it (:func:`asymptote_caps`).  Extra columns of
     ``fit`` become :class:`EffectTerm` s: ``effect_parameters[name]`` = (kind, shape parameters
-    of :func:`effect_shape`).  ``sampling`` = (τ0 s, the curve's terms per τ): the intervals of
+    of :func:`effect_shape`; they need ``sampling``).  ``sampling`` = (τ0 s, the curve's terms
+    per τ): the intervals of
     :data:`CORRELATED_TERMS` and of the effects then account for the correlation of the fitted
     τ points (:func:`fit_correlation`, :meth:`CompositeFit.sandwich_factor`); without it, and
     for K and R always, the points are counted as independent (K, R: with their evidence
@@ -1093,10 +1098,10 @@ def terms_from_fit(
         unit = TERM_UNITS[sensor][1 if kind == "prefilter" else 2]
         if kind == "prefilter":
             family, length_s, tau0 = shape
-            term = EffectTerm(kind, value, lo, hi, unit, length_s, 0.0, family, tau0, name)
+            term = EffectTerm(kind, value, lo, hi, unit, length_s, tau0, 0.0, family, name)
         else:
             width = shape[1] if kind == "narrowband" else 0.0
-            term = EffectTerm(kind, value, lo, hi, unit, shape[0], width, label=name)
+            term = EffectTerm(kind, value, lo, hi, unit, shape[0], sampling[0], width, label=name)
         effects.append(term)
     held = fit.rate_ramp_fit is not None and (
         "rate ramp R held at 0 by the likelihood-ratio test: D/dof with one parameter fewer "

@@ -199,7 +199,8 @@ def test_one_final_model_everywhere(looped: AnalysisResult) -> None:
 
 def test_model_curve_is_exactly_the_reported_terms(looped: AnalysisResult) -> None:
     """model_adev = √(Σ resolved terms' AVAR + effects − C/τ²), written out here from the
-    reported numbers (IEEE 952 Annex C; sinusoid AVAR A² sin⁴(πf τ)/(πf τ)²)."""
+    reported numbers (IEEE 952 Annex C; the sampled sinusoid's AVAR
+    A² sin⁴(πf τ)/(m sin(πf τ0))² at τ = m τ0, τ0 = 0.01 s)."""
     axis = looped.axes["gyro_x"]
     terms, tau = axis.terms, np.asarray(axis.curve.tau_s)
     (sine,) = terms.effects
@@ -210,8 +211,10 @@ def test_model_curve_is_exactly_the_reported_terms(looped: AnalysisResult) -> No
             avar += (t.value * shape) ** 2
     if terms.bias_instability.value is not None:
         avar += terms.bias_instability.value**2 * ieee952.flicker_shape(tau, terms.cutoff_hz)
-    x = np.pi * sine.parameter * tau
-    avar += sine.value**2 * np.sin(x) ** 4 / x**2
+    m = np.round(tau / 0.01)
+    avar += (sine.value * np.sin(np.pi * sine.parameter * tau) ** 2) ** 2 / (
+        m * np.sin(np.pi * sine.parameter * 0.01)
+    ) ** 2
     expected = np.sqrt(np.where(avar > 0, avar, np.nan))
     doc = report_json(looped)["axes"]["gyro_x"]["allan"]
     got = np.array([np.nan if v is None else v for v in doc["model_adev"]])

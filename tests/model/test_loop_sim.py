@@ -175,7 +175,7 @@ def test_sinusoid(seed):
 def _adev_at_hump(noise) -> tuple[float, float]:
     """(GM ADEV, IEEE 952 noise ADEV) at the hump τ = 1.89 Tc (°/s; El-Sheimy et al. 2008)."""
     tau = np.array([1.89 * GM_TC_S])
-    gm = GM_SIGMA_DPS**2 * gauss_markov_avar(tau, GM_TC_S)
+    gm = GM_SIGMA_DPS**2 * gauss_markov_avar(tau, GM_TC_S, 0.01)
     base = (
         noise.random_walk**2 / tau + (0.664 * noise.bias_instability) ** 2 + noise.rrw**2 * tau / 3
     )

@@ -284,7 +284,17 @@ def test_harmonic_trial_counts_one_parameter_and_holds_out_beside_its_fundamenta
     ax = loop._Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
     bare = loop._State(ax.avar, ax.y_d.copy(), None)
     ((_, with_line),) = loop._column_fits(
-        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(0.05,)], 0, None, ax.dense_from
+        ax.tau,
+        ax.avar,
+        ax.edf,
+        ax.tau_min,
+        {},
+        "sinusoid",
+        [(0.05,)],
+        0,
+        None,
+        ax.dense_from,
+        tau0=TAU0,
     )
     state = bare.with_column(
         "sinusoid", loop._column_candidate("sinusoid", (0.05,), with_line, bare, ax)
@@ -346,7 +356,17 @@ def _views(y, f_avar):
     current = (fit, loop.goodness(fit, ax.tau, state.avar, ax.edf))
     whiten = loop._whitener(fit, state, ax, "")
     fits = loop._column_fits(
-        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(f_avar,)], 0, None, ax.dense_from
+        ax.tau,
+        ax.avar,
+        ax.edf,
+        ax.tau_min,
+        {},
+        "sinusoid",
+        [(f_avar,)],
+        0,
+        None,
+        ax.dense_from,
+        tau0=TAU0,
     )
     cand = loop._column_candidate("sinusoid", (f_avar,), fits[0][1], state, ax)
     return (
@@ -443,7 +463,17 @@ def test_the_sinusoid_search_band_ends_where_the_fit_starts(base, paper_gyro):
     assert abs(loop._spectrum_peak(ax, state, fit) - 0.02) <= 2 / (N * TAU0)
     assert abs(loop._spectrum_peak(whole, state, fit) - 0.035) <= 2 / (N * TAU0)
     fits = loop._column_fits(
-        ax.tau, ax.avar, ax.edf, ax.tau_min, {}, "sinusoid", [(0.02,)], 0, None, ax.dense_from
+        ax.tau,
+        ax.avar,
+        ax.edf,
+        ax.tau_min,
+        {},
+        "sinusoid",
+        [(0.02,)],
+        0,
+        None,
+        ax.dense_from,
+        tau0=TAU0,
     )
     cand = loop._column_candidate("sinusoid", (0.02,), fits[0][1], state, ax)
     tone, whiten = loop._tone_test(ax, state, loop._whitener(fit, state, ax, ""), cand)
@@ -499,8 +529,10 @@ def test_a_quiet_sensor_under_a_line_above_the_fitted_range_closes_its_loop():
     """2 min at 100 Hz of 1e-4 rad/s noise under a 31 Hz, 0.05 rad/s vibration: the Allan
     curve is the line's 1/τ² envelope, fitted as quantisation with N, B and K at 0.  The
     loop's whiteners then had a zero covariance (ZeroDivisionError in Levinson's recursion,
-    found by fuzzing); quantisation now enters them as white phase noise, and the loop runs
-    to its errors on both views."""
+    found by fuzzing); quantisation now enters them as white phase noise.  The loop finds the
+    tone (its hold-out fits the periodogram's frequency, not only the grid's nearest 37 Hz;
+    the sampled sinusoid's AVAR, not the continuous form 1.39× low), and N comes out at the
+    white noise's 1e-5 rad/s/√Hz."""
     rng = np.random.default_rng(0)
     n, tau0 = 12_000, 0.01
     y = 1e-4 * rng.standard_normal(n) + 0.05 * np.sin(2 * np.pi * 31.0 * np.arange(n) * tau0)
@@ -509,6 +541,37 @@ def test_a_quiet_sensor_under_a_line_above_the_fitted_range_closes_its_loop():
     assert looped.terms_before.random_walk.value is None  # N: a bound (fitted 0)
     assert looped.before.p_value == pytest.approx(1 / 201)  # rejected: the line is unmodelled
     assert np.isfinite(looped.time_error_before) and looped.time_error_before > 0
+    (tone,) = looped.accepted
+    assert tone.kind == "sinusoid"
+    assert tone.params["frequency_hz"] == pytest.approx(31.0, abs=1e-4)
+    assert tone.params["amplitude"] == pytest.approx(0.05, rel=1e-3)
+    n_after = looped.terms_after.random_walk
+    assert n_after.lo < 1e-5 < n_after.hi and n_after.value == pytest.approx(1e-5, rel=0.1)
+    assert looped.after.p_value > 0.5
+
+
+@pytest.mark.parametrize("f0", [31.0, 45.0])
+def test_a_line_near_nyquist_is_found_with_its_rms_and_n_stays_the_white_noise(paper_gyro, f0):
+    """20 min at 100 Hz of the paper's gyro under a tone 10× the white noise's deviation at 31
+    or 45 Hz (a vibration aliased near Nyquist).  At 31 Hz the baseline's fit starts at 0.16 s
+    and the AVAR's coarse line grid (18, 26, 37 Hz) missed the line: nothing was found and N
+    came out 1.5× high.  The periodogram's strongest line among the τ left out seeds the search;
+    the line's rms is read from the sampled AVAR (the continuous form read it 18 % / 43 %
+    high)."""
+    tau0, n = 0.01, 120_000
+    rng = np.random.default_rng(1)
+    amp = 10 * paper_gyro.n / np.sqrt(tau0)
+    t = np.arange(n) * tau0
+    y = paper_gyro.rate(n, tau0, rng) + amp * np.sin(2 * np.pi * f0 * t + 0.3)
+    curve = allan_curves([y], tau0)[0]
+    looped = close_loop(AxisSignals("gyro_x", "gyro", y, tau0, None, None), curve)
+    (line,) = looped.accepted
+    assert line.kind == "narrowband"
+    lo, hi = line.intervals["frequency_hz"]
+    assert lo < f0 < hi and abs(line.params["frequency_hz"] - f0) < 3 / (n * tau0)
+    assert line.params["rms"] == pytest.approx(amp / np.sqrt(2), rel=0.01)
+    assert looped.terms_after.random_walk.value == pytest.approx(paper_gyro.n, rel=0.03)
+    assert looped.after.p_value > 0.05
 
 
 def test_a_tone_on_a_silent_sensor_is_found_and_its_loop_closes():
