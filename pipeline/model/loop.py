@@ -608,6 +608,7 @@ N_SHAPE = {"sinusoid": 1, "gauss_markov": 1, "narrowband": 2, "prefilter": 2}
 """Nonlinear shape parameters of each AVAR-column kind (frequency; Tc; centre and width;
 filter family and length)."""
 MAX_LINES = 3  # narrowband lines per axis (a fundamental and its harmonics)
+SHORT_LINE_SEEDS = 2  # periodogram lines seeding the search for a line below the fit start
 LINE_KINDS = ("sinusoid", "narrowband")  # spectral lines: their harmonics are searched
 LINE_SEEDS = (0.005, 0.04, 0.3)  # relative widths of the coarse line search
 LINE_WIDTHS = 14  # line widths profiled at the spectrum's centre
@@ -793,7 +794,9 @@ def _narrowband_refine(
 ) -> tuple[tuple, list[tuple[tuple, ieee952.CompositeFit]], ieee952.CompositeFit, dict]:
     """Both views of a narrowband line: its centre from the spectrum — a Whittle fit of the
     oscillator's PSD to the periodogram within a factor 1.6 of the strongest line near the AVAR
-    search's best frequency (:func:`spectral_line.line_centre`, over :data:`LINE_WIDTHS` widths
+    search's best frequency and away from the lines already modelled (:func:`_unmodelled_line`:
+    a strong line's spectrum drew a second one onto it, 31.2 Hz twice)
+    (:func:`spectral_line.line_centre`, over :data:`LINE_WIDTHS` widths
     from one frequency bin to half the centre) — then the AVAR profile over those widths at that
     centre.  Returns (best spec, the fits, best fit, the centre's evidence with its 95 %
     interval).
@@ -808,7 +811,7 @@ def _narrowband_refine(
     strongest bin and its interval the whole band searched."""
     f = spec[0]
     band = (f / 1.6, f * 1.6)
-    line = _line(ax, state, *band)
+    line = _unmodelled_line(ax, state, *band)
     peak = line.get("frequency_hz", f)
     widths = _line_widths(ax, peak)
     centre = _spectrum_line(ax, state, peak, widths)
@@ -1528,15 +1531,22 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
     short may lack a line whose AVAR peak (0.371/f0) lies among the τ it left out (measured: a
     ≈ 10 Hz vibration on the ADIS16405 accelerometers dropped τ 0.01–0.04 s and left a dip at
     its AVAR null τ ≈ 1/f0 = 0.1 s inside the range).  Searched as every line
-    (:func:`_narrowband_refine`, both views), but fitted from the first τ, and seeded twice: by
-    the AVAR's coarse grid and by the full-rate periodogram's strongest line among those τ
-    (below 0.8 × Nyquist, Fisher's p < :data:`ALPHA`), the better-fitting refinement kept —
-    near Nyquist neighbouring grid frequencies have unlike AVAR curves, and a 31 Hz line at
-    100 Hz, seeded by the grid alone, was refined at 15 Hz and never found; the fit start is then
-    chosen again with the line (:func:`ieee952.fit_start`) and the line is judged by the usual
-    rules (ΔBIC, hold-out, flags, the spectrum's excess) against the current model on that new
-    range, so both sides of every comparison cover the same τ.  ``None`` when the fit already
-    starts at the first τ, no line slot is left, or the line does not widen the range."""
+    (:func:`_narrowband_refine`, both views), but fitted from the first τ.
+
+    Seeds: the full-rate periodogram's :data:`SHORT_LINE_SEEDS` strongest unmodelled lines
+    among those τ (below 0.8 × Nyquist, Fisher's p < :data:`ALPHA`), then the AVAR's coarse
+    grid's best, kept where it refines elsewhere — near Nyquist neighbouring grid frequencies
+    have unlike AVAR curves: a 31 Hz line at 100 Hz, seeded by the grid alone, was refined at
+    15 Hz and never found.  A refined centre within 10 % of a line already modelled (or
+    refined from an earlier seed) is no new line: a spread line's shoulder refines back onto
+    it.  Each line (:func:`_short_line_judged`) has the fit start chosen again with it
+    (:func:`ieee952.fit_start`) and is judged by the usual rules (ΔBIC, hold-out, flags, the
+    spectrum's excess) against the current model on that new range, so both sides of every
+    comparison cover the same τ; a line that does not widen the range (another line below the
+    fit start still bends the short τ: 12 and 31 Hz lines at 100 Hz, neither found before) is
+    judged on the current range, which its AVAR tail reaches, and with it modelled the other
+    may widen the range in the next round.  Returns the trial of largest margin; ``None`` when
+    the fit already starts at the first τ, no line slot is left or no new line is refined."""
     tau, edf = ax.tau, ax.edf
     name = _column_name("narrowband", state)
     if name is None or ax.tau_min <= tau[0] * (1 + 1e-9):
@@ -1550,14 +1560,35 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
         tau, state.avar, edf, full.tau_min, state.columns, "narrowband", specs,
         state.n_nonlinear, cutoff, ax.dense_from, tau0=ax.sig.tau0,
     )  # fmt: skip
-    starts = [_best(seeds)[0][0]]
-    line = _line(ax, state, 0.371 / ax.tau_min, 0.8 * 0.5 / ax.sig.tau0)
-    if line and line["line_p_value"] < ALPHA:
-        f_line = line["frequency_hz"]
-        if abs(np.log(f_line / starts[0])) > np.log(1.6):  # outside the AVAR seed's band
-            starts.append(f_line)
-    refined = [_narrowband_refine(full, state, (f,), cutoff) for f in starts]
-    spec, fits, fit_line, centre = min(refined, key=lambda r: r[2].deviance)
+    starts: list[float] = []
+    for _ in range(SHORT_LINE_SEEDS):  # the strongest unmodelled lines, one after the other
+        line = _unmodelled_line(ax, state, 0.371 / ax.tau_min, 0.8 * 0.5 / ax.sig.tau0, starts)
+        if not line or line["line_p_value"] >= ALPHA:
+            break
+        starts.append(line["frequency_hz"])
+    starts.append(_best(seeds)[0][0])  # after the lines: kept where it refines elsewhere
+    modelled = [s[0] for k, s in state.effect_parameters.values() if k in LINE_KINDS]
+    trials: list[Trial] = []
+    for f in starts:
+        refined = _narrowband_refine(full, state, (f,), cutoff)
+        taken = [*modelled, *(t.cand.params["frequency_hz"] for t in trials)]
+        if all(abs(refined[0][0] / c - 1) > 0.1 for c in taken):
+            trials.append(_short_line_judged(ax, full, state, name, refined))
+    return max(trials, key=lambda t: t.margin, default=None)
+
+
+def _short_line_judged(
+    ax: _Axis,
+    full: _Axis,
+    state: _State,
+    name: str,
+    refined: tuple[tuple, list[tuple[tuple, ieee952.CompositeFit]], ieee952.CompositeFit, dict],
+) -> Trial:
+    """The :func:`_short_line_trial` of one refined line (:func:`_narrowband_refine` on the
+    range ``full`` from the first τ): judged on the range the fit start chooses with it, or on
+    the current range when it does not widen it."""
+    tau, edf = ax.tau, ax.edf
+    spec, fits, fit_line, centre = refined
     cand = _column_candidate("narrowband", spec, fit_line, state, full)
     cand.evidence["spectrum_centre"] = centre  # the centre is the spectrum's, as in the range
     cand.intervals["frequency_hz"] = [centre["frequency_lo"], centre["frequency_hi"]]
@@ -1570,8 +1601,9 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
         flicker_max=ieee952.flicker_limit(ax.avar_hi(state.avar)),
         dense_from=ax.dense_from,
     )
-    if tau_min >= ax.tau_min * (1 - 1e-9):
-        return None
+    widens = tau_min < ax.tau_min * (1 - 1e-9)
+    if not widens:  # another line below the fit start still bends the short τ: judged in range
+        tau_min = ax.tau_min
     wide = _with_start(ax, tau_min)
     fit_old = state.fit(wide)
     good_old = goodness(fit_old, tau, state.avar, edf)
@@ -1587,7 +1619,27 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
     holdout = partial(_holdout_column, wide, state, cand)
     key = f"{name} below the fit start"  # its own record next to the in-range line's
     return Trial(key, cand, float(dbic - DELTA_BIC), flags_ok, new_state, holdout,
-                 fit_start=(tau_min, note))  # fmt: skip
+                 fit_start=(tau_min, note) if widens else None)  # fmt: skip
+
+
+def _unmodelled_line(
+    ax: _Axis, state: _State, f_lo: float, f_hi: float, also: list[float] | None = None
+) -> dict:
+    """The most significant periodogram line (:func:`_line`, Fisher's test) in [f_lo, f_hi] Hz
+    away from the lines already modelled and the frequencies ``also`` (outside ±10 % of each,
+    as the AVAR's line grid, :func:`_grids`), its ``line_p_value`` multiplied by the number of
+    sub-bands searched; empty when none has three bins."""
+    modelled = [s[0] for k, s in state.effect_parameters.values() if k in LINE_KINDS]
+    modelled = sorted([*modelled, *(also or [])])
+    edges = [f_lo, *(e for c in modelled for e in (c / 1.1, c * 1.1)), f_hi]
+    pairs = zip(edges[::2], edges[1::2], strict=True)
+    clipped = [(max(lo, f_lo), min(hi, f_hi)) for lo, hi in pairs]
+    bands = [(lo, hi) for lo, hi in clipped if hi > lo]
+    lines = [line for band in bands if (line := _line(ax, state, *band))]
+    if not lines:
+        return {}
+    best = min(lines, key=lambda line: line["line_p_value"])
+    return best | {"line_p_value": min(1.0, best["line_p_value"] * len(bands))}
 
 
 def _corrected_state(ax: _Axis, state: _State, cand: effects.Candidate) -> _State:
