@@ -49,9 +49,12 @@ EFFECT_KINDS = (
     "event",
     "tilt",
     "outliers",
+    "vibration",
 )
 """Undeclared effects.  A supply-voltage coupling is not generated: a sensor_msgs/Imu bag
 carries no supply channel (nothing could be coupled to it)."""
+OVERSAMPLE = 8
+"""A vibration is generated this many times faster than the sensor's rate and sampled."""
 LN2 = np.log(2.0)
 
 
@@ -160,6 +163,23 @@ def lab_temperature(n: int, tau0: float, rng: np.random.Generator) -> np.ndarray
     return 25 + rng.uniform(0.3, 1.0) * np.sin(2 * np.pi * t / period + rng.uniform(0, 6.3)) + walk
 
 
+def _sampled_resonance(
+    n: int, tau0: float, f: float, q_factor: float, rng: np.random.Generator
+) -> np.ndarray:
+    """``n`` samples every ``tau0`` s of white noise through a resonance at ``f`` Hz of quality
+    ``q_factor``, run as an AR(2) every τ0 / :data:`OVERSAMPLE` s in blocks (bounded memory)."""
+    dt = tau0 / OVERSAMPLE
+    r = np.exp(-np.pi * f * dt / q_factor)
+    den = [1, -2 * r * np.cos(2 * np.pi * f * dt), r * r]
+    state = np.zeros(2)
+    out = np.empty(n)
+    for start in range(0, n, 1 << 20):
+        count = min(1 << 20, n - start)
+        fine, state = signal.lfilter([1.0], den, rng.standard_normal(count * OVERSAMPLE), zi=state)
+        out[start : start + count] = fine[::OVERSAMPLE]
+    return out
+
+
 def add_effect(
     y: np.ndarray,
     temp: np.ndarray,
@@ -199,6 +219,16 @@ def add_effect(
         r = np.exp(-np.pi * f * tau0 / q_factor)
         x = signal.lfilter([1.0], [1, -2 * r * np.cos(2 * np.pi * f * tau0), r * r],
                            rng.standard_normal(n))  # fmt: skip
+        rms = amp(0.371 / f)
+        y[:, a] += rms * x / x.std()
+        out |= {"frequency_hz": f, "q_factor": q_factor, "rms": rms}
+    elif kind == "vibration":
+        # a mechanical resonance (5 Hz up to 0.45 of the sample rate, often aliased from
+        # above): white noise through a resonance generated OVERSAMPLE times faster, then
+        # sampled instantaneously (an AR(2) at the sensor's rate is another process near Nyquist)
+        f = 10 ** rng.uniform(np.log10(5.0), np.log10(0.45 / tau0))
+        q_factor = rng.uniform(20, 100)
+        x = _sampled_resonance(n, tau0, f, q_factor, rng)
         rms = amp(0.371 / f)
         y[:, a] += rms * x / x.std()
         out |= {"frequency_hz": f, "q_factor": q_factor, "rms": rms}

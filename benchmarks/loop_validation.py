@@ -51,6 +51,7 @@ EXPECTED = {
     "temperature": {"temperature"},
     "sinusoid": {"sinusoid"},
     "narrowband": {"narrowband"},
+    "vibration": {"narrowband"},
     "gauss_markov": {"gauss_markov"},
     "bias_step": {"bias_step"},
     "ramp": {"ramp", "rate_ramp", "R term"},

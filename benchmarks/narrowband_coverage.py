@@ -1,4 +1,5 @@
-"""Coverage of the closed loop's ``frequency_hz`` interval for a spread line and for a tone.
+"""Coverage of the closed loop's ``frequency_hz`` (and, for a spread line, ``width_hz``)
+interval for a spread line and for a tone, and N after the loop against the truth.
 
 The setting of tests/model/test_loop_vibration.py: 3.6 h at 10 Hz of the paper's gyro noise
 (``PaperGyro`` of tests/model/conftest.py) plus, per seed, either a damped oscillator at 0.05 Hz
@@ -50,7 +51,7 @@ def main() -> None:
     args = p.parse_args()
     gyro = PaperGyro()
     for case in args.cases:
-        covered, right, widths = 0, 0, []
+        covered, right, widths, width_covered, n_errors = 0, 0, [], 0, []
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             y = recording(case, seed, gyro)
             res = close_loop(AxisSignals("gyro_x", "gyro", y, TAU0, None, None),
@@ -64,11 +65,17 @@ def main() -> None:
             covered += lo < F0 < hi
             right += line.kind == EXPECTED[case]
             widths.append(hi - lo)
+            w_lo, w_hi = line.intervals.get("width_hz", (np.nan, np.nan))
+            width_covered += bool(w_lo < F0 / Q < w_hi)
+            n_errors.append(res.terms_after.random_walk.value / gyro.n - 1)
             print(f"{case} {seed}: {line.kind} {line.params['frequency_hz']:.6f} Hz "
-                  f"[{lo:.6f}, {hi:.6f}]", flush=True)  # fmt: skip
+                  f"[{lo:.6f}, {hi:.6f}], width {line.params.get('width_hz', np.nan):.3g} Hz "
+                  f"[{w_lo:.3g}, {w_hi:.3g}], N {n_errors[-1]:+.2%}", flush=True)  # fmt: skip
         print(f"{case}: interval covers {F0} Hz on {covered}/{args.seeds}, kind "
               f"{EXPECTED[case]} on {right}/{args.seeds}, median interval width "
-              f"{np.median(widths):.3g} Hz")  # fmt: skip
+              f"{np.median(widths):.3g} Hz; width interval covers {F0 / Q:g} Hz on "
+              f"{width_covered}/{args.seeds}; N within 2 % on "
+              f"{sum(abs(e) <= 0.02 for e in n_errors)}/{len(n_errors)}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ from pathlib import Path
 import allantools
 import numpy as np
 import pytest
-from scipy import stats
+from scipy import signal, stats
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
 import independent_generator as gen
@@ -75,3 +75,20 @@ def test_bag_decodes_to_the_generated_values(tmp_path: Path):
     got = rec.frames.select(gen.AXES).to_numpy()
     np.testing.assert_array_equal(got, y)
     np.testing.assert_allclose(np.diff(rec.frames["t_s"].to_numpy()), 0.02, atol=1e-9)
+
+
+def test_vibration_is_a_resonance_sampled_at_the_sensors_rate():
+    """The vibration kind: white noise through a resonance run 8× faster than the sensor and
+    sampled, its spectrum peaking at the resonance (here 31 Hz at 100 Hz, where an AR(2) at
+    the sensor's own rate is another process), its half-power width f/Q; added at its rms."""
+    rng = np.random.default_rng(4)
+    x = gen._sampled_resonance(1 << 18, 0.01, 31.0, 50.0, rng)
+    f, p = signal.welch(x, fs=100.0, nperseg=1 << 12)
+    half = f[p > p.max() / 2]
+    assert (half.max() + half.min()) / 2 == pytest.approx(31.0, abs=0.08)
+    assert half.max() - half.min() == pytest.approx(31.0 / 50.0, rel=0.3)
+    y, _, truth = gen.generate(0.2, 100.0, 5, "vibration", 3.0)
+    clean, _, _ = gen.generate(0.2, 100.0, 5)
+    axis = gen.AXES.index(truth.effect["axis"])
+    assert np.std(y[:, axis] - clean[:, axis]) == pytest.approx(truth.effect["rms"], rel=1e-9)
+    assert 5.0 <= truth.effect["frequency_hz"] <= 45.0

@@ -83,8 +83,9 @@ class _Pooled:
 @dataclass(frozen=True)
 class LineCentre:
     """A spread line's centre (Hz) with its 95 % Whittle profile interval, the width (Hz) at
-    the best centre, the dispersion φ and the number of periodogram ordinates the fine fit read
-    (pooled when they are many)."""
+    the best centre with its own (``width_lo``, ``width_hi``: the profile over the centre), the
+    dispersion φ and the number of periodogram ordinates the fine fit read (pooled when they
+    are many)."""
 
     frequency_hz: float
     lo: float
@@ -92,6 +93,8 @@ class LineCentre:
     width_hz: float
     dispersion: float
     ordinates: int
+    width_lo: float
+    width_hi: float
 
     def as_evidence(self) -> dict[str, float]:
         """The fit as report.json evidence (SI: Hz)."""
@@ -100,6 +103,8 @@ class LineCentre:
             "frequency_lo": self.lo,
             "frequency_hi": self.hi,
             "width_hz": self.width_hz,
+            "width_lo": self.width_lo,
+            "width_hi": self.width_hi,
             "dispersion": self.dispersion,
             "ordinates": self.ordinates,
         }
@@ -153,18 +158,41 @@ def line_centre(
     dof = max(fine.power.size - 5, 1)  # three linear coefficients, centre and width
     phi = max(1.0, d_min / dof)
 
-    def excess(c: float) -> float:  # > 0 outside the 95 % interval
+    def excess(c: float) -> float:  # > 0 outside the centre's 95 % interval
         return (profile(c) - d_min) / phi - CHI2_95
 
-    edges = []
-    for sign in (-1.0, 1.0):
-        inner, step = c_hat, 0.05 * w_hat
-        while True:
-            outer = c_hat + sign * step
-            if excess(outer) > 0 or step > CENTRE_SPAN * w_hat:
-                break
-            inner, step = outer, 2 * step
-        a, b = sorted((inner, outer))
-        inside = excess(outer) <= 0  # censored at CENTRE_SPAN widths
-        edges.append(outer if inside else optimize.brentq(excess, a, b, xtol=1e-4 * w_hat))
-    return LineCentre(float(c_hat), float(edges[0]), float(edges[1]), w_hat, phi, int(power.size))
+    def width_profile(lw: float) -> float:  # min over the centre of the deviance at a width
+        res = optimize.minimize_scalar(
+            lambda dc: fine.deviance(c_hat + dc * w_hat, w_hat * np.exp(lw)),
+            bounds=(-2.0, 2.0),
+            method="bounded",
+            options={"xatol": 1e-3},
+        )
+        return min(float(res.fun), fine.deviance(c_hat, w_hat * np.exp(lw)))
+
+    def width_excess(lw: float) -> float:  # > 0 outside ln(width / w_hat)'s 95 % interval
+        return (width_profile(lw) - d_min) / phi - CHI2_95
+
+    c_lo, c_hi = (_edge(excess, c_hat, s * w_hat, CENTRE_SPAN * w_hat) for s in (-1.0, 1.0))
+    w_lo, w_hi = (
+        w_hat * np.exp(_edge(width_excess, 0.0, s, np.log(WIDTH_SPAN))) for s in (-1.0, 1.0)
+    )
+    return LineCentre(
+        float(c_hat), c_lo, c_hi, w_hat, phi, int(power.size), float(w_lo), float(w_hi)
+    )
+
+
+def _edge(excess, start: float, unit: float, span: float) -> float:
+    """Where ``excess`` (≤ 0 at ``start``) crosses 0 going from ``start`` in the direction and
+    scale of ``unit``: steps of 0.05, 0.1, 0.2 … × ``unit`` bracket it, Brent's root finder
+    (to 1e-4 × |unit|) finds it; censored at ``span`` from ``start``."""
+    inner, step = start, 0.05
+    while True:
+        outer = start + step * unit
+        if excess(outer) > 0 or step * abs(unit) > span:
+            break
+        inner, step = outer, 2 * step
+    if excess(outer) <= 0:  # censored
+        return float(outer)
+    a, b = sorted((inner, outer))
+    return float(optimize.brentq(excess, a, b, xtol=1e-4 * abs(unit)))

@@ -6,7 +6,9 @@ The noise is the paper's gyro (``paper_gyro``, tests/model/conftest.py).
 
 from __future__ import annotations
 
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +17,9 @@ from scipy import signal, special
 from imupipe.model import effects, loop, spectral_line
 from imupipe.model.loop import AxisSignals, close_loop
 from imupipe.stats.allan import allan_curves
+
+sys.path.insert(0, str(Path(__file__).parents[2] / "benchmarks"))
+import independent_generator as gen  # shares no code with imupipe
 
 TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
 NEW_KINDS = {"narrowband", "prefilter", "ramp"}
@@ -601,10 +606,12 @@ def test_two_lines_below_the_fit_start_are_found_one_after_the_other(paper_gyro)
 
 
 def test_a_spread_line_near_nyquist_is_one_line(paper_gyro):
-    """1 h at 100 Hz of the paper's gyro under a 31 Hz resonance (an AR(2) of Q 20, rms 5× the
-    white noise's deviation): one narrowband line, at 31.2 Hz and 1.2 Hz wide, its rms within
-    2 %.  The periodogram's strongest line and the shoulders of the line already modelled
-    refined back onto it: a second line at the same centre, 2.9 Hz wide, was accepted."""
+    """1 h at 100 Hz of the paper's gyro under a 31 Hz resonance (an AR(2) of Q 20 at the
+    sensor's rate, rms 5× the white noise's deviation): one narrowband line, at 31.2 Hz, its rms
+    within 2 %.  The periodogram's strongest line and the shoulders of the line already modelled
+    refined back onto it: a second line at the same centre, 2.9 Hz wide, was accepted.  So near
+    Nyquist an AR(2)'s spectrum is no oscillator's (Whittle dispersion 5.0 >
+    ``WHITTLE_WIDTH_DISPERSION``): the width is the AVAR's, 1.23 Hz."""
     tau0, n, f0 = 0.01, 360_000, 31.0
     rng = np.random.default_rng(1)
     w = paper_gyro.n / np.sqrt(tau0)
@@ -618,8 +625,35 @@ def test_a_spread_line_near_nyquist_is_one_line(paper_gyro):
     (line,) = looped.accepted
     assert line.kind == "narrowband"
     assert line.params["frequency_hz"] == pytest.approx(31.2, abs=0.05)
-    assert line.params["width_hz"] == pytest.approx(1.23, rel=0.1)
+    assert line.evidence["spectrum_centre"]["dispersion"] > loop.WHITTLE_WIDTH_DISPERSION
+    assert line.evidence["spectrum_centre"]["width_from"] == "avar"
+    assert line.params["width_hz"] == pytest.approx(1.23, rel=0.02)
     assert line.params["rms"] == pytest.approx(5 * w, rel=0.02)
+
+
+def test_a_resonance_s_width_is_the_spectrum_s_and_n_stays_the_white_noise(paper_gyro):
+    """1 h at 100 Hz of the paper's gyro under a mechanical resonance at 22.9 Hz of Q 49 (the
+    independent generator's vibration: an AR(2) run 8× faster, then sampled), rms 8× the white
+    noise's deviation.  The line's AVAR tail, S(0)/τ with S(0) ∝ its width, is white noise to
+    the Allan curve, so N depends on the width: profiled on the AVAR it came out 0.306 Hz
+    (truth 0.467) and N 1.34× the truth, outside its interval.  Read in the spectrum (Whittle),
+    the width's interval holds the truth and N is within 2 %, inside its interval."""
+    tau0, n, f0, q = 0.01, 360_000, 22.9, 49.0
+    rng = np.random.default_rng(3)
+    w = paper_gyro.n / np.sqrt(tau0)
+    x = gen._sampled_resonance(n, tau0, f0, q, rng)
+    y = paper_gyro.rate(n, tau0, rng) + 8 * w * x / x.std()
+    curve = allan_curves([y], tau0)[0]
+    looped = close_loop(AxisSignals("gyro_x", "gyro", y, tau0, None, None), curve)
+    (line,) = looped.accepted
+    assert line.kind == "narrowband"
+    assert line.evidence["spectrum_centre"]["width_from"] == "spectrum"
+    lo, hi = line.intervals["width_hz"]
+    assert lo < f0 / q < hi and line.params["width_hz"] == pytest.approx(f0 / q, rel=0.05)
+    assert line.params["rms"] == pytest.approx(8 * w, rel=0.02)
+    n_after = looped.terms_after.random_walk
+    assert n_after.value == pytest.approx(paper_gyro.n, rel=0.02)
+    assert n_after.lo < paper_gyro.n < n_after.hi
 
 
 def test_a_tone_on_a_silent_sensor_is_found_and_its_loop_closes():
