@@ -843,7 +843,7 @@ def _narrowband_refine(
     else:  # the spectrum's width, within the searched ones (a tone's: one bin of the record)
         w = float(np.clip(centre.width_hz, widths[0], widths[-1]))
         specs = [(float(c), w)]
-        lo, hi = np.clip([centre.width_lo, centre.width_hi], 0.0, widths[-1])
+        lo, hi = np.clip(centre.width_interval, 0.0, widths[-1])
         evidence["width_interval_hz"] = [float(min(lo, w)), float(max(hi, w))]
         evidence["width_from"] = "spectrum"
     fits = _column_fits(
