@@ -286,6 +286,11 @@ class _State:
     # 95 % interval (Hz) of each modelled line's frequency (sinusoid, narrowband), by column
     frequency_intervals: dict[str, list[float]] = field(default_factory=dict)
 
+    @property
+    def line_frequencies(self) -> list[float]:
+        """Frequencies (Hz) of the lines modelled (sinusoids and narrowband lines)."""
+        return [s[0] for kind, s in self.effect_parameters.values() if kind in LINE_KINDS]
+
     def with_column(self, name: str, cand: effects.Candidate) -> _State:
         """This state with the AVAR-column candidate ``cand`` added as column ``name``: its
         non-linear parameters counted, its shape (``cand.evidence["shape"]``) recorded (the
@@ -620,6 +625,12 @@ LINE_WIDTHS = 14  # line widths profiled at the spectrum's centre
 PROFILE_SHAPES = 12  # shapes whose value intervals make up a profile interval
 
 
+def _apart(f: float, lines: list[float]) -> bool:
+    """Whether ``f`` (Hz) lies more than 10 % from each of ``lines`` (Hz): a line of its own,
+    not one of them."""
+    return all(abs(f / c - 1) > 0.1 for c in lines)
+
+
 def _shape(kind: str, tau0: float) -> Callable[[np.ndarray, tuple], np.ndarray]:
     """Column function (τ, shape parameters) → AVAR per unit squared value of a series
     sampled every ``tau0`` s (:func:`ieee952.effect_shape`)."""
@@ -758,7 +769,7 @@ def _grids(ax: _Axis, state: _State) -> dict[str, list[tuple]]:
     tau, tau_min, tau0 = ax.tau, ax.tau_min, ax.sig.tau0
     freqs = _sinusoid_frequencies(ax)
     lines = [s[0] for k, s in state.effect_parameters.values() if k == "narrowband"]
-    free = [f for f in freqs if all(abs(f / c - 1) > 0.1 for c in lines)]
+    free = [f for f in freqs if _apart(f, lines)]
     nyquist = 0.5 / tau0
     return {
         "sinusoid": [(float(f),) for f in freqs],
@@ -1484,11 +1495,7 @@ def _harmonic_specs(ax: _Axis, state: _State) -> list[tuple[float, float]]:
         for n in range(2, MAX_HARMONIC + 1):
             f = n * f1
             taken = list(lines) + [c for c, _ in specs]
-            if (
-                f < 0.4 / ax.sig.tau0
-                and 0.371 / f >= ax.tau_min
-                and all(abs(f / c - 1) > 0.1 for c in taken)
-            ):
+            if f < 0.4 / ax.sig.tau0 and 0.371 / f >= ax.tau_min and _apart(f, taken):
                 specs.append((float(f), float(max(n * w1, bin_hz))))
     return specs
 
@@ -1597,12 +1604,11 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
             break
         starts.append(line["frequency_hz"])
     starts.append(_best(seeds)[0][0])  # after the lines: kept where it refines elsewhere
-    modelled = [s[0] for k, s in state.effect_parameters.values() if k in LINE_KINDS]
     trials: list[Trial] = []
     for f in starts:
         refined = _narrowband_refine(full, state, (f,), cutoff)
-        taken = [*modelled, *(t.cand.params["frequency_hz"] for t in trials)]
-        if all(abs(refined[0][0] / c - 1) > 0.1 for c in taken):
+        taken = [*state.line_frequencies, *(t.cand.params["frequency_hz"] for t in trials)]
+        if _apart(refined[0][0], taken):
             trials.append(_short_line_judged(ax, full, state, name, refined))
     return max(trials, key=lambda t: t.margin, default=None)
 
@@ -1659,8 +1665,7 @@ def _unmodelled_line(
     away from the lines already modelled and the frequencies ``also`` (outside ±10 % of each,
     as the AVAR's line grid, :func:`_grids`), its ``line_p_value`` multiplied by the number of
     sub-bands searched; empty when none has three bins."""
-    modelled = [s[0] for k, s in state.effect_parameters.values() if k in LINE_KINDS]
-    modelled = sorted([*modelled, *(also or [])])
+    modelled = sorted([*state.line_frequencies, *(also or [])])
     edges = [f_lo, *(e for c in modelled for e in (c / 1.1, c * 1.1)), f_hi]
     pairs = zip(edges[::2], edges[1::2], strict=True)
     clipped = [(max(lo, f_lo), min(hi, f_hi)) for lo, hi in pairs]
@@ -1902,8 +1907,7 @@ def _column_candidate(kind, spec, fit_new, state, ax) -> effects.Candidate:
     if kind == "narrowband":
         params = {"frequency_hz": spec[0], "width_hz": spec[1], "rms": amp}
         evidence = {"avar_peak_tau_s": 0.371 / spec[0], "shape": spec}
-        lines = [s[0] for k, s in state.effect_parameters.values() if k in LINE_KINDS]
-        for f1 in lines:
+        for f1 in state.line_frequencies:
             if order := harmonic_order(spec[0], f1):
                 evidence["harmonic_of_hz"], evidence["harmonic"] = f1, order
             elif order := harmonic_order(f1, spec[0]):  # found after its stronger harmonic

@@ -192,10 +192,11 @@ def _edge(excess, start: float, unit: float, span: float) -> float:
     inner, step = start, 0.05
     while True:
         outer = start + step * unit
-        if excess(outer) > 0 or step * abs(unit) > span:
+        inside = excess(outer) <= 0  # each call a profile fit: read once
+        if not inside or step * abs(unit) > span:
             break
         inner, step = outer, 2 * step
-    if excess(outer) <= 0:  # censored
+    if inside:  # censored
         return float(outer)
     a, b = sorted((inner, outer))
     return float(optimize.brentq(excess, a, b, xtol=1e-4 * abs(unit)))
