@@ -264,7 +264,7 @@ def _block_median_steps(t: np.ndarray) -> np.ndarray:
     for i in range(0, len(t) - 1, _CHUNK):
         steps = np.diff(t[i : min(i + _CHUNK, len(t) - 1) + 1])
         k = len(steps) // RATE_BLOCK
-        parts.append(np.median(steps[: k * RATE_BLOCK].reshape(k, RATE_BLOCK), axis=1))
+        parts.append(robust.row_medians(steps[: k * RATE_BLOCK].reshape(k, RATE_BLOCK)))
     return np.concatenate(parts) if parts else np.empty(0)
 
 

@@ -783,14 +783,15 @@ SPIKE_FALSE_ALARM = 1e-3
 
 
 LEVEL_CHUNK = 1 << 20
-"""Samples of the blocks whose medians numpy takes at once (an 8 MB partitioned copy)."""
+"""Samples of the blocks whose medians are taken at once (an 8 MB sorted copy)."""
 
 
 def _block_level(y: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
     """(median of each block of ``block`` samples (the last may be shorter), float32 deviation
-    y_i − median of i's block).  The medians are numpy's over chunks of whole blocks (numba's
-    np.median would cost ~1.5 s of compiling on a first run), the chunks on the usable cores
-    (:func:`imupipe.jit.spread`: numpy's partition releases the GIL); the deviations a
+    y_i − median of i's block).  The medians are :func:`imupipe.stats.robust.row_medians`
+    over chunks of whole blocks (numba's np.median would cost ~1.5 s of compiling on a first
+    run), the chunks on the usable cores (:func:`imupipe.jit.spread`: numpy's sort releases
+    the GIL); the deviations a
     compiled pass over the blocks' parts (:func:`_deviation`)."""
     n = y.size
     whole = n // block
@@ -800,7 +801,7 @@ def _block_level(y: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
     def medians(start: int, step: int) -> None:
         for b in chunks[start::step]:
             rows = y[b * block : min(whole, b + chunks.step) * block].reshape(-1, block)
-            level[b : b + len(rows)] = np.median(rows, axis=1)
+            level[b : b + len(rows)] = robust.row_medians(rows)
 
     spread(medians, len(chunks))
     if whole < level.size:

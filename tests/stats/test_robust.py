@@ -7,7 +7,14 @@ import pytest
 from scipy import ndimage
 
 from imupipe import jit
-from imupipe.stats.robust import abs_quantile, mad, median, median_positive, running_median
+from imupipe.stats.robust import (
+    abs_quantile,
+    mad,
+    median,
+    median_positive,
+    row_medians,
+    running_median,
+)
 
 RNG = np.random.default_rng(5)
 CASES = {
@@ -139,3 +146,17 @@ def test_running_median_follows_a_level_step_and_ignores_a_spike():
 def test_running_median_refuses_non_finite_values():
     with pytest.raises(ValueError, match="finite"):
         running_median(np.array([[1.0], [np.nan], [2.0]]), 1)
+
+
+@pytest.mark.parametrize("width", [1, 2, 7, 25, 50])
+def test_row_medians_equal_numpys_bit_for_bit(width):
+    """Odd and even rows (the mean of the two middle values), quantised values with ties, a
+    row with NaN (NaN, as numpy) and rows with ±inf."""
+    rng = np.random.default_rng(width)
+    rows = np.round(rng.standard_normal((400, width)) * 3) / 7
+    rows[0, width // 2] = np.nan
+    rows[1, 0] = np.inf
+    rows[2, -1] = -np.inf
+    got = row_medians(rows)
+    assert np.array_equal(got, np.median(rows, axis=1), equal_nan=True)
+    assert np.isnan(got[0]) and np.isnan(got).sum() == 1
