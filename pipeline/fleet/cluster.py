@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import multiprocessing
 from collections.abc import Iterator
 
 import dask.config
@@ -86,8 +87,19 @@ def _started(n: int) -> Iterator[LocalCluster]:
     """The embedded ``LocalCluster`` of ``n`` single-threaded worker processes.
 
     Raises:
-        FleetError: it did not start (Dask's start-up timeouts on an overloaded machine).
+        FleetError: it did not start (Dask's start-up timeouts on an overloaded machine, a
+            worker process that died starting), or this process is a worker being spawned and
+            importing the caller's script (no ``if __name__ == "__main__":`` around the call).
     """
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        # a worker process being spawned runs the user's script again (as __mp_main__): a
+        # cluster started there waits for workers of its own that can never start, and the
+        # user's fleet waits for this one: both hung, silently (multiprocessing's own check,
+        # spawn._check_not_importing_main, is the same)
+        raise FleetError(
+            "a fleet was started while a worker process was importing the calling script: "
+            'call imupipe.analyze_fleet under `if __name__ == "__main__":`'
+        )
     try:
         with dask.config.set(WORKER_CONFIG):  # read by the nannies as they spawn the workers
             cluster = LocalCluster(
@@ -101,10 +113,11 @@ def _started(n: int) -> Iterator[LocalCluster]:
                 silence_logs=logging.CRITICAL,
                 env=SINGLE_THREAD_ENV,
             )
-    except (TimeoutError, OSError) as exc:
+    except (TimeoutError, OSError, RuntimeError) as exc:  # RuntimeError: a worker died starting
         raise FleetError(
             f"the local Dask cluster of {n} worker(s) did not start: {exc or type(exc).__name__} "
-            "(is the machine overloaded? --workers fewer, or --scheduler an existing cluster)"
+            "(is the machine overloaded? --workers fewer, or --scheduler an existing cluster; "
+            'from a script: is imupipe.analyze_fleet called under `if __name__ == "__main__":`?)'
         ) from exc
     with cluster:
         yield cluster

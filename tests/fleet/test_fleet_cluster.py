@@ -25,6 +25,7 @@ from imupipe.fleet.run import run_fleet
 from imupipe.report.rerun_view import rerun_executable
 
 BIN = Path(sys.executable).parent
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "adis16364_default_5min.mcap"
 
 
 def _record(path: Path, seed: int) -> Path:
@@ -294,3 +295,28 @@ def test_embedded_workers_keep_glibc_malloc_trimming_and_run_no_profiler():
         (seen,) = client.run(probe).values()
     assert seen == (None, False, "1")
     assert dask.config.get("distributed.worker.profile.enabled")  # the client's is untouched
+
+
+def test_a_script_without_a_main_guard_fails_in_seconds_instead_of_hanging(tmp_path):
+    """Each embedded worker is a spawned process that imports the caller's script again: a
+    script calling ``analyze_fleet`` at its top level started a cluster in every worker, and the
+    fleet and its workers waited on each other for ever (measured: still waiting after 300 s).
+    Now the worker refuses, saying why, and the fleet fails at once with one ``FleetError``."""
+    script = tmp_path / "no_guard.py"
+    script.write_text(
+        "import imupipe\n"
+        f"imupipe.analyze_fleet([{str(SAMPLE)!r}], {str(tmp_path / 'out')!r},"
+        " workers=1)\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, script], capture_output=True, text=True, timeout=120, cwd=tmp_path
+    )
+    assert proc.returncode == 1
+    last = proc.stderr.strip().splitlines()[-1]
+    assert last.startswith("imupipe.errors.FleetError: the local Dask cluster of 1 worker(s)")
+    assert last.endswith('called under `if __name__ == "__main__":`?)')
+    assert not (tmp_path / "out" / SAMPLE.stem).exists()
+    assert (
+        "FleetError: a fleet was started while a worker process was importing the calling "
+        'script: call imupipe.analyze_fleet under `if __name__ == "__main__":`'
+    ) in proc.stderr
