@@ -9,6 +9,8 @@ Writer, zstd chunks of 1 MiB, :mod:`imupipe.testing.busy_bag`):
 * ``busy+camera``: the same plus a 10 Hz ``sensor_msgs/msg/CompressedImage`` of 20 kB;
 * ``busy, no compression``: the busy bag's topics in uncompressed chunks (the decoding itself,
   without the decompression that bounds the zstd bags);
+* ``busy, SQLite (.db3)``: the busy bag's topics in rosbag2's SQLite storage (ROS 2 Humble's
+  default), written by rosbags' rosbag2 writer; against ``AnyReader`` only (no MCAP to iterate);
 * ``adis+tf``: our ADIS16364 frames at ``--imu-rate`` Hz interleaved with ``/tf``;
 * with ``--imu-temp-hours H``: ``sensor_msgs/msg/Imu`` at 100 Hz and a 10 Hz Temperature topic,
   H hours (issue 10 measured 41 s to decode 12 h of it);
@@ -62,6 +64,7 @@ from imupipe.testing.busy_bag import (
     imu_stream,
     other_streams,
     write_rosbag2,
+    write_rosbag2_db3,
 )
 from imupipe.testing.ros_cdr import temperature_payloads
 
@@ -161,6 +164,18 @@ def bench(
         print(ratio("AnyReader", anyr, ours))
 
 
+def bench_db3(name: str, bag: Path, repeat: int, topic: str = IMU_TOPIC) -> None:
+    """Ours against rosbags' AnyReader over a rosbag2 SQLite bag."""
+    ours, n = timed(lambda: decode(bag, topic=topic).frames.height, repeat)
+    anyr, count = timed(lambda: any_reader(bag, topic))
+    assert count == n, (count, n)
+    size_mb = sum(f.stat().st_size for f in bag.glob("*.db3")) / 1e6
+    print(f"\n{name}: {n} IMU messages, file {size_mb:.0f} MB")
+    print(line("imupipe decode", ours, n))
+    print(line("rosbags AnyReader", anyr, n))
+    print(ratio("AnyReader", anyr, ours))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=60.0)
@@ -209,6 +224,11 @@ def main() -> None:
                 subprocess.run([*cmd, str(Path(tmp) / "out")], check=True)
                 whole = time.perf_counter() - start
                 print(f"  whole imupipe analyze (decode..rrd): {whole:.2f} s")
+        bag = Path(tmp) / "busy.db3"
+        start = time.perf_counter()
+        write_rosbag2_db3(bag, busy)
+        print(f"\n(busy, SQLite written by rosbags in {time.perf_counter() - start:.0f} s)")
+        bench_db3("busy, SQLite (.db3)", bag, args.repeat)
         del cases, busy, imu
         adis = [
             adis_stream(IMU_TOPIC, seconds, args.imu_rate, seed=3),

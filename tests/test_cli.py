@@ -55,7 +55,7 @@ def make_inputs(d: Path) -> dict[str, tuple[Path, str]]:
         "empty": (d / "empty.mcap", "empty.mcap: empty file"),
         "random": (d / "random.mcap", "random.mcap is not an MCAP file (bad magic)"),
         "text": (d / "notes.txt", "notes.txt is not an MCAP file (bad magic)"),
-        "dir": (d / "no_mcap", "no_mcap: a directory without MCAP files"),
+        "dir": (d / "no_mcap", "no_mcap: a directory without MCAP or .db3 files"),
         "no_imu": (
             no_imu(d / "chat.mcap"),
             "chat.mcap: no IMU topic (topics in the file: /chatter, /rosout)",

@@ -114,10 +114,14 @@ def _started(n: int) -> Iterator[LocalCluster]:
                 env=SINGLE_THREAD_ENV,
             )
     except (TimeoutError, OSError, RuntimeError) as exc:  # RuntimeError: a worker died starting
+        hint = (
+            'from a script: is imupipe.analyze_fleet called under `if __name__ == "__main__":`?'
+            if isinstance(exc, RuntimeError)
+            else "is the machine overloaded? --workers fewer, or --scheduler an existing cluster"
+        )
         raise FleetError(
-            f"the local Dask cluster of {n} worker(s) did not start: {exc or type(exc).__name__} "
-            "(is the machine overloaded? --workers fewer, or --scheduler an existing cluster; "
-            'from a script: is imupipe.analyze_fleet called under `if __name__ == "__main__":`?)'
+            f"the local Dask cluster of {n} worker(s) did not start: "
+            f"{exc or type(exc).__name__} ({hint})"
         ) from exc
     with cluster:
         yield cluster

@@ -36,7 +36,7 @@ from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 import polars as pl
@@ -45,6 +45,7 @@ from mcap.records import Channel, Schema
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
 from imupipe.errors import ConfigError, InputError
+from imupipe.io.db3_scan import Db3Scanner, is_db3
 from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, McapScanner
 from imupipe.io.mcap_walk import CDR_HEAD, CdrLayout
 from imupipe.pages import small_pages
@@ -498,17 +499,17 @@ def _listed_files(bag: Path, meta: Path) -> list[str]:
 
 
 def bag_files(path: Path) -> tuple[list[Path], list[str]]:
-    """The MCAP files of a recording and warnings about them: the file itself, or a rosbag2
-    directory's split files.
+    """The storage files of a recording and warnings about them: the file itself, or a rosbag2
+    directory's split files (MCAP, or SQLite ``.db3``).
 
     A rosbag2 directory lists its files in ``metadata.yaml`` (``relative_file_paths``) in
     recording order; a listed file that is missing is warned about.  Without the list (a killed
-    recorder leaves none), the directory's ``*.mcap`` files are taken in natural name order
-    (bag_2 before bag_10).
+    recorder leaves none), the directory's ``*.mcap`` files, else its ``*.db3`` files, are
+    taken in natural name order (bag_2 before bag_10).
 
     Raises:
-        InputError: not a file, empty, a directory without MCAP files, a listed path that
-            leaves the directory (absolute or with ``..``), or a split file that is not a
+        InputError: not a file, empty, a directory without MCAP or .db3 files, a listed path
+            that leaves the directory (absolute or with ``..``), or a split file that is not a
             regular file (a FIFO, a folder, a dangling link).
     """
     if path.is_file():
@@ -526,24 +527,35 @@ def bag_files(path: Path) -> tuple[list[Path], list[str]]:
                 raise InputError(
                     f"{meta}: lists {entry!r}, outside the bag directory; refusing to read it"
                 )
-            if not entry.endswith(".mcap"):
+            if not entry.endswith(STORAGE_SUFFIXES):
                 continue
             if os.path.lexists(path / entry):
                 files.append(path / entry)
             else:
                 warnings.append(f"{meta.name} lists {entry}, which is missing")
+    for suffix in STORAGE_SUFFIXES:
+        files = files or sorted(path.glob(f"*{suffix}"), key=_natural_key)
     if not files:
-        files = sorted(path.glob("*.mcap"), key=_natural_key)
-    if not files:
-        raise InputError(f"{path}: a directory without MCAP files")
+        raise InputError(f"{path}: a directory without MCAP or .db3 files")
     for file in files:
         if not file.is_file():
             raise InputError(f"{file}: not a regular file (a FIFO, a folder or a broken link?)")
     return files, warnings
 
 
+STORAGE_SUFFIXES = (".mcap", ".db3")
+"""The storage files of a rosbag2 directory: MCAP, or rosbag2's SQLite storage."""
+
+
+def open_scanner(file: Path, **options: Any) -> McapScanner | Db3Scanner:
+    """The scanner of one storage file: :class:`imupipe.io.db3_scan.Db3Scanner` for an SQLite
+    database (told by its header), else :class:`imupipe.io.mcap_scan.McapScanner`; ``options``
+    as theirs (``wanted``, ``progress``, ``max_chunk_bytes``)."""
+    return (Db3Scanner if is_db3(file) else McapScanner)(file, **options)
+
+
 def mcap_files(path: Path) -> list[Path]:
-    """The MCAP files of a recording (:func:`bag_files` without its warnings)."""
+    """The storage files of a recording (:func:`bag_files` without its warnings)."""
     return bag_files(path)[0]
 
 
@@ -765,7 +777,7 @@ def scan(
     frame_ids: dict[str, str] = {}  # the header.frame_id of each topic's first message
     for file in files:
         offset = done
-        scanner = McapScanner(
+        scanner = open_scanner(
             file,
             progress=progress and (lambda n, o=offset: progress(o + n)),
             max_chunk_bytes=max_chunk_bytes,

@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from imupipe.device.frame_schema import SCHEMA_NAME
-from imupipe.io.decode import IMU_SCHEMA, bag_files
-from imupipe.io.mcap_scan import McapScanner, ScanReport
+from imupipe.io.db3_scan import Db3Report
+from imupipe.io.decode import IMU_SCHEMA, bag_files, open_scanner
+from imupipe.io.mcap_scan import ScanReport
 
 
 @dataclass
@@ -37,12 +38,16 @@ class RecordingInfo:
     path: Path
     file_bytes: int
     chunks: int
+    """MCAP chunks (none in rosbag2's SQLite storage)."""
     topics: list[TopicInfo]
     metadata: dict[str, dict[str, str]]
     damage: list[str] = field(default_factory=list)
+    sqlite: bool = False
+    """Stored in rosbag2's SQLite storage (``.db3``) rather than MCAP."""
 
     def lines(self) -> list[str]:
-        out = [f"{self.path}: {self.file_bytes / 1e6:.1f} MB, {self.chunks} chunks"]
+        storage = "rosbag2 SQLite storage (.db3)" if self.sqlite else f"{self.chunks} chunks"
+        out = [f"{self.path}: {self.file_bytes / 1e6:.1f} MB, {storage}"]
         for t in self.topics:
             rate = (t.messages - 1) / t.duration_s if t.duration_s > 0 else 0.0
             out.append(
@@ -55,7 +60,9 @@ class RecordingInfo:
         return out
 
 
-def _topic(topics: dict[str, TopicInfo], report: ScanReport, channel_id: int) -> TopicInfo:
+def _topic(
+    topics: dict[str, TopicInfo], report: ScanReport | Db3Report, channel_id: int
+) -> TopicInfo:
     channel = report.channels[channel_id]
     schema = report.schemas.get(channel.schema_id)
     return topics.setdefault(channel.topic, TopicInfo(channel.topic, schema.name if schema else ""))
@@ -66,15 +73,17 @@ def describe(path: Path) -> RecordingInfo:
     the messages and log-time span of every topic.
 
     Raises:
-        InputError: not a file, empty, a directory without MCAP files, not MCAP.
+        InputError: not a file, empty, a directory without MCAP or .db3 files, not MCAP (nor
+            a rosbag2 database).
     """
     path = Path(path)
     files, damage = bag_files(path)
     topics: dict[str, TopicInfo] = {}
     metadata: dict[str, dict[str, str]] = {}
     file_bytes = chunks = 0
+    sqlite = False
     for file in files:
-        scanner = McapScanner(file)
+        scanner = open_scanner(file)
         report = scanner.report
         for batch in scanner.batches():
             info = _topic(topics, report, batch.channel_id)
@@ -86,6 +95,7 @@ def describe(path: Path) -> RecordingInfo:
             _topic(topics, report, channel_id)
         file_bytes += report.file_bytes
         chunks += report.chunks
+        sqlite |= isinstance(report, Db3Report)
         metadata.update(report.metadata)
         prefix = f"{file.name}: " if len(files) > 1 else ""
         damage.extend(prefix + d for d in report.damage())
@@ -93,6 +103,7 @@ def describe(path: Path) -> RecordingInfo:
         path=path,
         file_bytes=file_bytes,
         chunks=chunks,
+        sqlite=sqlite,
         topics=sorted(topics.values(), key=lambda t: t.topic),
         metadata=metadata,
         damage=damage,

@@ -7,7 +7,8 @@ ROS 2 Humble message definitions, so rosbags and the mcap library read the file 
 ``frame_id`` changes length from message to message (``FRAME_IDS``), which moves the fields after
 the header by 0-7 bytes of CDR padding; the gyro and accelerometer values include the awkward
 ones (NaN with a payload, ±inf, -0.0, subnormals) so that a decoder that does not copy bytes
-exactly is caught.
+exactly is caught.  :func:`write_rosbag2_db3` stores the same streams the way ROS 2 Humble's
+recorder does by default: rosbag2's SQLite storage, written by rosbags' rosbag2 writer.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 from mcap.writer import CompressionType, Writer
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.typesys import Stores, get_typestore
 
 from imupipe.device.adis16364 import FrameBlock
@@ -250,6 +253,24 @@ def write_rosbag2(directory: Path, streams: list[Stream], **options) -> Path:
 """
     )
     return path
+
+
+def write_rosbag2_db3(directory: Path, streams: list[Stream]) -> Path:
+    """The streams in arrival (log time) order as a rosbag2 directory in the SQLite storage
+    (``.db3``: the default of ROS 2 up to Humble), written by rosbags' rosbag2 writer (its own
+    ``metadata.yaml``); returns the ``.db3`` file."""
+    with Rosbag2Writer(directory, version=8, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        connections = [
+            writer.add_connection(s.topic, s.msgtype, typestore=TYPESTORE) for s in streams
+        ]
+        times = np.concatenate([s.log_time for s in streams])
+        which = np.concatenate([np.full(len(s.log_time), k) for k, s in enumerate(streams)])
+        index = np.concatenate([np.arange(len(s.log_time)) for s in streams])
+        which, index, times = (a.tolist() for a in (which, index, times))
+        for j in np.argsort(times, kind="stable").tolist():
+            k = which[j]
+            writer.write(connections[k], times[j], streams[k].payloads[index[j]])
+    return next(directory.glob("*.db3"))
 
 
 def write_robot_bag(directory: Path, seconds: float = 300.0, rate_hz: float = 100.0) -> Path:

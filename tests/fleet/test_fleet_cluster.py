@@ -314,7 +314,10 @@ def test_a_script_without_a_main_guard_fails_in_seconds_instead_of_hanging(tmp_p
     assert proc.returncode == 1
     last = proc.stderr.strip().splitlines()[-1]
     assert last.startswith("imupipe.errors.FleetError: the local Dask cluster of 1 worker(s)")
-    assert last.endswith('called under `if __name__ == "__main__":`?)')
+    assert last.endswith(
+        "did not start: Nanny failed to start. (from a script: is imupipe.analyze_fleet "
+        'called under `if __name__ == "__main__":`?)'
+    )
     assert not (tmp_path / "out" / SAMPLE.stem).exists()
     assert (
         "FleetError: a fleet was started while a worker process was importing the calling "

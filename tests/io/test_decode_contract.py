@@ -333,7 +333,7 @@ def test_what_is_not_a_recording(tmp_path: Path) -> None:
         decode(bag)
     (tmp_path / "notes").mkdir()
     (tmp_path / "notes" / "x.txt").write_text("x")
-    with pytest.raises(InputError, match="notes: a directory without MCAP files"):
+    with pytest.raises(InputError, match=r"notes: a directory without MCAP or \.db3 files"):
         decode(tmp_path / "notes")
 
 

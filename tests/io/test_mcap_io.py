@@ -161,7 +161,7 @@ def test_not_mcap_and_empty_are_input_errors(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="not a file"):
         decode(tmp_path / "missing.mcap")
     (tmp_path / "bag").mkdir()
-    with pytest.raises(InputError, match="without MCAP files"):
+    with pytest.raises(InputError, match=r"without MCAP or \.db3 files"):
         decode(tmp_path / "bag")
 
 

@@ -1,0 +1,227 @@
+"""rosbag2's SQLite storage (``.db3``: the default storage of ROS 2 up to Humble), read through
+the same interface as :class:`imupipe.io.mcap_scan.McapScanner`: a :class:`Db3Report` and the
+wanted topics' messages as :class:`~imupipe.io.mcap_scan.CdrBatch` or
+:class:`~imupipe.io.mcap_scan.MessageBatch` blocks, so everything after the scan is shared.
+
+The rosbag2 SQLite schema (rosbag2_storage_default_plugins, ``sqlite_storage.cpp``): a table
+``topics(id, name, type, serialization_format, ...)`` and a table ``messages(id, topic_id,
+timestamp, data)`` whose ``data`` is the serialised message (CDR, as in an MCAP Message record)
+and ``timestamp`` the receive time in ns (an MCAP log time).  Messages are read in ``id`` order —
+the order the recorder wrote them (``id`` is the table's rowid), as an MCAP file's — a block of
+:data:`BLOCK_ROWS` at a time,
+only the wanted topics' rows, and a message's CDR fields are copied out by the same compiled
+kernel as a chunk's (:func:`imupipe.io.mcap_walk.cdr_rows`, over the block's payloads joined).
+
+The file is opened read-only; its strings (topic names, types) reach the outputs escaped like an
+MCAP file's.  A payload longer than ``max_chunk_bytes``, or one that is no blob (SQLite's types
+are the writer's choice), is not read (counted as damage), and a database that turns out
+damaged part way keeps every block read before, with a warning.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sqlite3
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mcap.records import Channel, Schema
+
+from imupipe.errors import InputError
+from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, CdrBatch, MessageBatch
+from imupipe.io.mcap_walk import CdrLayout, CdrTable, MessageIndex, cdr_rows
+
+SQLITE_MAGIC = b"SQLite format 3\x00"
+"""The first 16 bytes of every SQLite 3 database file."""
+BLOCK_ROWS = 1 << 16
+"""Messages joined into one block (~25 MB of Imu payloads)."""
+FETCH_ROWS = 1 << 12
+"""Messages fetched from the database at a time: a database damaged part way loses at most
+these beyond the damage."""
+
+
+def is_db3(path: Path) -> bool:
+    """Whether the file at ``path`` is an SQLite 3 database (by its header, not its name)."""
+    with open(path, "rb") as f:
+        return f.read(len(SQLITE_MAGIC)) == SQLITE_MAGIC
+
+
+@dataclass
+class Db3Report:
+    """What the scan of a ``.db3`` file found besides messages (the fields of
+    :class:`imupipe.io.mcap_scan.ScanReport` that a rosbag2 database has), and what it could
+    not read."""
+
+    file_bytes: int = 0
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    chunks: int = 0
+    messages: int = 0
+    """Messages of wanted topics yielded."""
+    skipped: int = 0
+    """Messages of wanted topics not read: longer than ``max_chunk_bytes``, or whose payload is
+    no blob or whose timestamp no integer."""
+    broken_after: int | None = None
+    """The last message (rowid) read before the database failed to read further (None: read to
+    its end)."""
+    last_row: int = 0
+    """The database's last message (rowid; 0 if its last page cannot be read)."""
+    broken_reason: str = ""
+
+    def damage(self) -> list[str]:
+        """One human sentence per kind of damage (empty for an intact database)."""
+        out = []
+        if self.skipped:
+            out.append(
+                f"{self.skipped} message(s) skipped unread (larger than the memory budget "
+                "allows, or no binary payload with an integer timestamp)"
+            )
+        if self.broken_after is not None:
+            lost = (
+                f"the last {100 * (1 - self.broken_after / self.last_row):.1f} % of the messages"
+                if self.last_row >= self.broken_after
+                else "the messages after it (the last page is cut off: how many is unknown)"
+            )
+            out.append(
+                f"database damaged ({self.broken_reason}): read up to message "
+                f"{self.broken_after}; {lost} could not be read"
+            )
+        return out
+
+
+class Db3Scanner:
+    """The messages of a rosbag2 SQLite database (module docstring), with the interface of
+    :class:`imupipe.io.mcap_scan.McapScanner`: :attr:`report` (topics as channels, their
+    types as schemas), :meth:`batches` and :meth:`cdr_batches`.
+
+    Raises:
+        InputError: not a database, or not a rosbag2 one (no ``topics``/``messages`` tables).
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        wanted: Callable[[Channel, Schema | None], bool] = lambda c, s: True,
+        progress: Callable[[int], None] | None = None,
+        max_chunk_bytes: int = MAX_CHUNK_BYTES,
+    ) -> None:
+        self.path = Path(path)
+        self.report = Db3Report(file_bytes=os.path.getsize(self.path))
+        self._wanted = wanted
+        self._progress = progress or (lambda n: None)
+        self._max_bytes = max_chunk_bytes
+        self._db = sqlite3.connect(f"{self.path.absolute().as_uri()}?mode=ro", uri=True)
+        try:
+            topics = self._db.execute(
+                "SELECT id, name, type, serialization_format FROM topics ORDER BY id"
+            ).fetchall()
+            self._db.execute("SELECT 1 FROM messages LIMIT 1").fetchall()
+        except sqlite3.DatabaseError as exc:
+            self._db.close()
+            raise InputError(f"{self.path}: not a readable rosbag2 database ({exc})") from exc
+        with contextlib.suppress(sqlite3.DatabaseError):  # its last page cut off: unknown (0)
+            last = self._db.execute("SELECT max(rowid) FROM messages").fetchone()[0]
+            self.report.last_row = last or 0
+        for topic_id, name, type_name, encoding in topics:
+            if not isinstance(topic_id, int) or not 0 <= topic_id < 1 << 16:
+                self._db.close()
+                raise InputError(f"{self.path}: topic id {topic_id!r} is not a rosbag2 topic id")
+            schema = Schema(id=topic_id, name=str(type_name), encoding="ros2msg", data=b"")
+            self.report.schemas[topic_id] = schema
+            self.report.channels[topic_id] = Channel(
+                id=topic_id,
+                topic=str(name),
+                message_encoding=str(encoding),
+                schema_id=topic_id,
+                metadata={},
+            )
+
+    def batches(self) -> Iterator[MessageBatch]:
+        """The wanted topics' messages, one batch per topic and block, in recording order."""
+        ids = [
+            i for i, c in self.report.channels.items() if self._wanted(c, self.report.schemas[i])
+        ]
+        for data, index in self._blocks(ids):
+            for channel_id in np.unique(index.channel).tolist():
+                mine = index.channel == channel_id
+                yield MessageBatch(
+                    channel_id, index.log_time[mine], data, index.offset[mine], index.size[mine]
+                )
+
+    def cdr_batches(
+        self, layout: Callable[[Channel, Schema | None], CdrLayout | None]
+    ) -> Iterator[CdrBatch]:
+        """The messages of the CDR topics ``layout`` gives a :class:`CdrLayout` for, one batch of
+        rows per topic and block, in recording order."""
+        table = CdrTable()
+        for i, channel in self.report.channels.items():
+            wanted = channel.message_encoding == "cdr"
+            table.set(i, layout(channel, self.report.schemas[i]) if wanted else None)
+        for data, index in self._blocks(table.channel_ids):
+            rows = cdr_rows(data, index, table, stop_at_unknown=False)
+            for s in np.flatnonzero(rows.good + rows.bad).tolist():
+                first = int(rows.first[s])
+                payload = None
+                if first >= 0:
+                    at = int(index.offset[first])
+                    payload = data[at : at + int(index.size[first])]
+                self.report.messages += int(rows.good[s] + rows.bad[s])
+                yield CdrBatch(
+                    table.channel_ids[s], rows.log_time[s], rows.rows[s], int(rows.bad[s]), payload
+                )
+
+    def _blocks(self, ids: list[int]) -> Iterator[tuple[np.ndarray, MessageIndex]]:
+        """The messages of topics ``ids`` as (their payloads joined, a :class:`MessageIndex`
+        into them), :data:`BLOCK_ROWS` at a time in ``rowid`` order; the database is closed
+        when the last block is read.
+
+        Raises:
+            InputError: the database cannot be read at all."""
+        readable = "typeof(data) = 'blob' AND length(data) <= ? AND typeof(timestamp) = 'integer'"
+        block: list[tuple] = []
+        last = 0  # rowid of the last message read
+        try:
+            if not ids:
+                return
+            cursor = self._db.execute(
+                f"SELECT rowid, topic_id, timestamp, CASE WHEN {readable} THEN data END "
+                f"FROM messages WHERE topic_id IN ({','.join(map(str, ids))}) ORDER BY rowid",
+                (self._max_bytes,),
+            )
+            while rows := cursor.fetchmany(FETCH_ROWS):
+                block += rows
+                last = rows[-1][0]
+                if len(block) >= BLOCK_ROWS:
+                    yield from self._kept(block)
+                    block = []
+                    self._progress(
+                        int(self.report.file_bytes * last / max(self.report.last_row, 1))
+                    )
+        except sqlite3.DatabaseError as exc:
+            if not last:
+                raise InputError(f"{self.path}: not a readable rosbag2 database ({exc})") from exc
+            self.report.broken_after, self.report.broken_reason = last, str(exc)
+        finally:
+            self._db.close()
+        yield from self._kept(block)
+
+    def _kept(self, block: list[tuple]) -> Iterator[tuple[np.ndarray, MessageIndex]]:
+        """The readable messages of ``block`` (rows of rowid, topic, timestamp and payload or
+        None) as their payloads joined and a :class:`MessageIndex` into them; the others
+        counted as skipped."""
+        kept = [row for row in block if row[3] is not None]
+        self.report.skipped += len(block) - len(kept)
+        if not kept:
+            return
+        payloads = [row[3] for row in kept]
+        size = np.fromiter(map(len, payloads), np.int64, len(kept))
+        offset = np.zeros(len(kept), np.int64)
+        np.cumsum(size[:-1], out=offset[1:])
+        data = np.frombuffer(b"".join(payloads), np.uint8)
+        channel = np.fromiter([row[1] for row in kept], np.uint16, len(kept))
+        log_time = np.fromiter([row[2] for row in kept], np.int64, len(kept)).view(np.uint64)
+        yield data, MessageIndex(offset, size, channel, log_time, len(data))

@@ -1,0 +1,181 @@
+"""ROS 2 bags in rosbag2's SQLite storage (``.db3``: the default of ROS 2 up to Humble), written by
+rosbags' rosbag2 writer, not our code: the decoded values equal rosbags' own reader's bit for bit
+(NaN payloads, -0.0 and subnormals included), and the same messages stored as MCAP decode to the
+same frame; hostile databases give one clear error or what can be recovered, with a warning.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import Reader as Rosbag2Reader
+
+from imupipe.errors import InputError
+from imupipe.io import db3_scan
+from imupipe.io.decode import IMU_SCHEMA, decode
+from imupipe.io.info import describe
+from imupipe.testing.busy_bag import (
+    TYPESTORE,
+    imu_stream,
+    other_streams,
+    write_rosbag2,
+    write_rosbag2_db3,
+)
+from imupipe.vocab import AXES
+
+TOPICS = ("/imu0/data", "/imu1/data")
+SECONDS = 1.5
+
+
+def rosbags_imu(bag: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps ns int64, (n, 6) gyro+accel float64) of ``topic`` as rosbags' reader gives them."""
+    stamps, axes = [], []
+    with Rosbag2Reader(bag) as reader:
+        wanted = [c for c in reader.connections if c.topic == topic]
+        for _, _, raw in reader.messages(connections=wanted):
+            msg = TYPESTORE.deserialize_cdr(raw, IMU_SCHEMA)
+            w, a = msg.angular_velocity, msg.linear_acceleration
+            stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+            axes.append([w.x, w.y, w.z, a.x, a.y, a.z])
+    return np.array(stamps, np.int64), np.array(axes, np.float64)
+
+
+@pytest.fixture(scope="module")
+def streams():
+    imus = [imu_stream(t, SECONDS, 200 + 100 * k, seed=k) for k, t in enumerate(TOPICS)]
+    return [*imus, *other_streams(SECONDS, camera=True, seed=7)]
+
+
+@pytest.fixture(scope="module")
+def db3_bag(tmp_path_factory, streams) -> Path:
+    bag = tmp_path_factory.mktemp("db3") / "bag"
+    write_rosbag2_db3(bag, streams)
+    return bag
+
+
+def test_db3_bag_equals_rosbags_reader_bit_for_bit(db3_bag: Path) -> None:
+    """Two Imu topics at 200 and 300 Hz interleaved message by message with /tf, /odom, a
+    temperature topic and 20 kB camera images; frame_ids of 0-30 characters."""
+    for topic in TOPICS:
+        rec = decode(db3_bag, topic=topic)
+        stamps, axes = rosbags_imu(db3_bag, topic)
+        assert rec.frames.height == len(stamps) == int(SECONDS * (200 + 100 * TOPICS.index(topic)))
+        np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
+        ours = rec.frames.select(AXES).to_numpy()
+        np.testing.assert_array_equal(ours.view(np.uint64), axes.view(np.uint64))
+        assert rec.warnings == []
+        assert rec.topics == list(TOPICS)  # the IMU topics
+
+
+def test_db3_and_mcap_storage_of_the_same_messages_decode_alike(
+    tmp_path: Path, db3_bag: Path, streams
+) -> None:
+    """The same streams stored as MCAP (the mcap library's writer) and as SQLite (rosbags):
+    every column of the decoded frame equal, log-time columns included; the .db3 file given
+    alone reads as its directory."""
+    write_rosbag2(tmp_path / "mcap_bag", streams)
+    for topic in TOPICS:
+        from_mcap = decode(tmp_path / "mcap_bag", topic=topic).frames
+        assert decode(db3_bag, topic=topic).frames.equals(from_mcap)
+        assert decode(next(db3_bag.glob("*.db3")), topic=topic).frames.equals(from_mcap)
+
+
+def test_describe_counts_every_topic_of_a_db3_bag(db3_bag: Path, streams) -> None:
+    info = describe(db3_bag)
+    counts = {t.topic: (t.schema, t.messages, t.start_ns, t.end_ns) for t in info.topics}
+    assert counts == {
+        s.topic: (s.msgtype, len(s.log_time), int(s.log_time[0]), int(s.log_time[-1]))
+        for s in streams
+    }
+    assert info.damage == []
+    assert (
+        info.lines()[0]
+        == f"{db3_bag}: {info.file_bytes / 1e6:.1f} MB, rosbag2 SQLite storage (.db3)"
+    )
+
+
+def _copy(bag: Path, tmp_path: Path) -> Path:
+    """A copy of the bag's .db3 file to tamper with."""
+    target = tmp_path / "tampered.db3"
+    shutil.copyfile(next(bag.glob("*.db3")), target)
+    return target
+
+
+def test_unreadable_rows_are_skipped_and_counted(tmp_path: Path, db3_bag: Path) -> None:
+    """SQLite stores whatever type a writer gives: a text payload, a text timestamp and a
+    payload over the chunk limit are skipped unread and counted in one warning, the other
+    messages decode as before."""
+    db3 = _copy(db3_bag, tmp_path)
+    with sqlite3.connect(db3) as db:
+        imu0 = db.execute("SELECT id FROM topics WHERE name = ?", (TOPICS[0],)).fetchone()[0]
+        rows = [r for (r,) in db.execute(
+            "SELECT id FROM messages WHERE topic_id = ? ORDER BY id LIMIT 3", (imu0,)
+        )]  # fmt: skip
+        db.execute("UPDATE messages SET data = 'text' WHERE id = ?", (rows[0],))
+        db.execute("UPDATE messages SET timestamp = 'noon' WHERE id = ?", (rows[1],))
+        db.execute("UPDATE messages SET data = zeroblob(2000000) WHERE id = ?", (rows[2],))
+    rec = decode(db3, topic=TOPICS[0], max_chunk_bytes=1_000_000)
+    stamps, axes = rosbags_imu(db3_bag, TOPICS[0])
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps[3:])
+    np.testing.assert_array_equal(rec.frames["gyro_y"].to_numpy()[-5:], axes[-5:, 1])
+    assert rec.warnings == [
+        "3 message(s) skipped unread (larger than the memory budget allows, or no binary "
+        "payload with an integer timestamp)"
+    ]
+
+
+def test_a_database_that_is_not_a_bag_is_one_line(tmp_path: Path) -> None:
+    path = tmp_path / "other.db3"
+    with sqlite3.connect(path) as db:
+        db.execute("CREATE TABLE things (x)")
+    with pytest.raises(InputError, match=r"other\.db3: not a readable rosbag2 database \(no such"):
+        decode(path)
+
+
+def test_a_topic_id_beyond_the_channel_ids_is_refused(tmp_path: Path, db3_bag: Path) -> None:
+    db3 = _copy(db3_bag, tmp_path)
+    with sqlite3.connect(db3) as db:
+        db.execute("UPDATE topics SET id = 70000 WHERE name = '/tf'")
+    with pytest.raises(InputError, match="topic id 70000 is not a rosbag2 topic id"):
+        decode(db3)
+
+
+def test_a_directory_without_storage_files_says_which_it_looked_for(tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(InputError, match=r"a directory without MCAP or \.db3 files"):
+        decode(tmp_path)
+
+
+def test_a_database_damaged_part_way_keeps_what_precedes_the_damage(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """Pages overwritten half way through (a bad sector, a partial copy): the messages before
+    them decode, and the warning says where reading stopped and how much of the database that
+    leaves unread.  (A file cut short is refused whole: SQLite opens no table of it.)"""
+    monkeypatch.setattr(db3_scan, "FETCH_ROWS", 64)
+    monkeypatch.setattr(db3_scan, "BLOCK_ROWS", 256)
+    db3 = write_rosbag2_db3(tmp_path / "bag", [imu_stream(TOPICS[0], 10.0, 200, seed=4)])
+    stamps, _ = rosbags_imu(tmp_path / "bag", TOPICS[0])
+    size = db3.stat().st_size
+    with open(db3, "r+b") as f:
+        f.seek(size // 2 // 4096 * 4096)
+        f.write(np.random.default_rng(0).integers(0, 256, 4 * 4096, np.uint8).tobytes())
+    rec = decode(db3)
+    n = rec.frames.height
+    assert 256 < n < len(stamps) == 2000
+    assert n % 64 == 0  # whole fetches before the one that failed
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps[:n])
+    (warning,) = rec.warnings
+    lost = 100 * (1 - n / len(stamps))
+    assert warning == (
+        f"database damaged (database disk image is malformed): read up to message {n}; the "
+        f"last {lost:.1f} % of the messages could not be read"
+    )
+    cut = tmp_path / "cut.db3"
+    cut.write_bytes(db3.read_bytes()[: size // 2])
+    with pytest.raises(InputError, match=r"cut\.db3: not a readable rosbag2 database \(database"):
+        decode(cut)
