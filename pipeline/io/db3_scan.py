@@ -31,7 +31,7 @@ import numpy as np
 from mcap.records import Channel, Schema
 
 from imupipe.errors import InputError
-from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, CdrBatch, MessageBatch
+from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, CdrBatch, MessageBatch, cdr_batches_of
 from imupipe.io.mcap_walk import CdrLayout, CdrTable, MessageIndex, cdr_rows
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -163,16 +163,9 @@ class Db3Scanner:
             table.set(i, layout(channel, self.report.schemas[i]) if wanted else None)
         for data, index in self._blocks(table.channel_ids):
             rows = cdr_rows(data, index, table, stop_at_unknown=False)
-            for s in np.flatnonzero(rows.good + rows.bad).tolist():
-                first = int(rows.first[s])
-                payload = None
-                if first >= 0:
-                    at = int(index.offset[first])
-                    payload = data[at : at + int(index.size[first])]
-                self.report.messages += int(rows.good[s] + rows.bad[s])
-                yield CdrBatch(
-                    table.channel_ids[s], rows.log_time[s], rows.rows[s], int(rows.bad[s]), payload
-                )
+            for batch in cdr_batches_of(data, index, rows, table.channel_ids):
+                self.report.messages += len(batch) + batch.bad
+                yield batch
 
     def _blocks(self, ids: list[int]) -> Iterator[tuple[np.ndarray, MessageIndex]]:
         """The messages of topics ``ids`` as (their payloads joined, a :class:`MessageIndex`

@@ -156,6 +156,21 @@ class CdrBatch:
         return len(self.rows)
 
 
+def cdr_batches_of(
+    data: np.ndarray, index: MessageIndex, rows: CdrRows, channel_ids: list[int]
+) -> Iterator[CdrBatch]:
+    """The :class:`CdrBatch` of each slot with messages in ``rows`` (:func:`imupipe.io.
+    mcap_walk.cdr_rows` of ``index`` over the bytes ``data``; ``channel_ids``: the channel of
+    each slot), its first well-formed payload a view of ``data``."""
+    for s in np.flatnonzero(rows.good + rows.bad).tolist():
+        first = int(rows.first[s])
+        payload = None
+        if first >= 0:
+            at = int(index.offset[first])
+            payload = data[at : at + int(index.size[first])]
+        yield CdrBatch(channel_ids[s], rows.log_time[s], rows.rows[s], int(rows.bad[s]), payload)
+
+
 @dataclass(frozen=True)
 class MessageRun:
     """Consecutive messages of one channel with equal payload size.
@@ -661,20 +676,9 @@ class McapScanner:
             part = index.since(done)
             if rows is None:
                 rows = cdr_rows(data, part, self._table, stop_at_unknown=False)
-            for s in np.flatnonzero(rows.good + rows.bad).tolist():
-                first = int(rows.first[s])
-                payload = None
-                if first >= 0:
-                    at = int(part.offset[first])
-                    payload = data[at : at + int(part.size[first])]
-                self.report.messages += int(rows.good[s] + rows.bad[s])
-                yield CdrBatch(
-                    self._table.channel_ids[s],
-                    rows.log_time[s],
-                    rows.rows[s],
-                    int(rows.bad[s]),
-                    payload,
-                )
+            for batch in cdr_batches_of(data, part, rows, self._table.channel_ids):
+                self.report.messages += len(batch) + batch.bad
+                yield batch
             done += rows.used
             rows = None
 
