@@ -33,8 +33,9 @@ import polars as pl
 from mcap.reader import make_reader
 
 from imupipe.errors import InputError
-from imupipe.io.decode import ImuRecording, ScannedRecording, decode, mcap_files, scan
+from imupipe.io.decode import ImuRecording, ScannedRecording, decode, scan
 from imupipe.io.mcap_scan import chunk_limit
+from imupipe.io.rosbag2 import storage_files
 from imupipe.progress import StageProgress
 from imupipe.vocab import AXES
 
@@ -262,7 +263,7 @@ def open_columns(
         InputError: unreadable recording (see :func:`imupipe.io.decode.decode`), or a
             ``tmp_dir`` that is no directory or has too little free space for the spill.
     """
-    files = mcap_files(Path(path))
+    files = storage_files(Path(path))
     size = sum(f.stat().st_size for f in files)
     estimate = peak_estimate(files)
     limits = {"max_chunk_bytes": chunk_limit(budget_bytes), "temperature_topic": temperature_topic}

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import zstandard
 from mcap.records import Channel, Schema
 
 from imupipe.errors import InputError
@@ -64,7 +65,7 @@ class Db3Report:
     """Messages of wanted topics yielded."""
     skipped: int = 0
     """Messages of wanted topics not read: longer than ``max_chunk_bytes``, or whose payload is
-    no blob or whose timestamp no integer."""
+    no blob (or, compressed per message, no zstd frame) or whose timestamp no integer."""
     broken_after: int | None = None
     """The last message (rowid) read before the database failed to read further (None: read to
     its end)."""
@@ -78,7 +79,7 @@ class Db3Report:
         if self.skipped:
             out.append(
                 f"{self.skipped} message(s) skipped unread (larger than the memory budget "
-                "allows, or no binary payload with an integer timestamp)"
+                "allows, or no readable binary payload with an integer timestamp)"
             )
         if self.broken_after is not None:
             lost = (
@@ -108,9 +109,13 @@ class Db3Scanner:
         wanted: Callable[[Channel, Schema | None], bool] = lambda c, s: True,
         progress: Callable[[int], None] | None = None,
         max_chunk_bytes: int = MAX_CHUNK_BYTES,
+        message_compression: str = "",
     ) -> None:
         self.path = Path(path)
         self.report = Db3Report(file_bytes=os.path.getsize(self.path))
+        self._inflate = (
+            zstandard.ZstdDecompressor().decompress if message_compression == "zstd" else None
+        )
         self._wanted = wanted
         self._progress = progress or (lambda n: None)
         self._max_bytes = max_chunk_bytes
@@ -202,15 +207,29 @@ class Db3Scanner:
             self._db.close()
         yield from self._kept(block)
 
+    def _inflated(
+        self, kept: list[tuple], payloads: list[bytes]
+    ) -> tuple[list[tuple], list[bytes]]:
+        """The rows whose payload is a zstd frame that inflates to at most ``max_chunk_bytes``,
+        and those payloads inflated."""
+        rows, out = [], []
+        for row, payload in zip(kept, payloads, strict=True):
+            with contextlib.suppress(zstandard.ZstdError):
+                out.append(self._inflate(payload, max_output_size=self._max_bytes))
+                rows.append(row)
+        return rows, out
+
     def _kept(self, block: list[tuple]) -> Iterator[tuple[np.ndarray, MessageIndex]]:
         """The readable messages of ``block`` (rows of rowid, topic, timestamp and payload or
         None) as their payloads joined and a :class:`MessageIndex` into them; the others
         counted as skipped."""
         kept = [row for row in block if row[3] is not None]
+        payloads = [row[3] for row in kept]
+        if self._inflate is not None:  # rosbag2's per-message compression
+            kept, payloads = self._inflated(kept, payloads)
         self.report.skipped += len(block) - len(kept)
         if not kept:
             return
-        payloads = [row[3] for row in kept]
         size = np.fromiter(map(len, payloads), np.int64, len(kept))
         offset = np.zeros(len(kept), np.int64)
         np.cumsum(size[:-1], out=offset[1:])

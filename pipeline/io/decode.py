@@ -30,13 +30,11 @@ columns (in memory, or appended to files in a spill directory), and
 from __future__ import annotations
 
 import mmap
-import os
-import re
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import BinaryIO
 
 import numpy as np
 import polars as pl
@@ -45,9 +43,9 @@ from mcap.records import Channel, Schema
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
 from imupipe.errors import ConfigError, InputError
-from imupipe.io.db3_scan import Db3Scanner, is_db3
-from imupipe.io.mcap_scan import MAX_CHUNK_BYTES, McapScanner
+from imupipe.io.mcap_scan import MAX_CHUNK_BYTES
 from imupipe.io.mcap_walk import CDR_HEAD, CdrLayout
+from imupipe.io.rosbag2 import bag_compression, bag_files, opened
 from imupipe.pages import small_pages
 from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
 from imupipe.vocab import AXES
@@ -478,87 +476,6 @@ def _seconds(cols: dict[str, np.ndarray], use_log: bool, keep_stamps: bool) -> n
     return _map_chunks(base, lambda b: (b - first) / 1e9, out)
 
 
-def _natural_key(file: Path) -> list[str | int]:
-    """Sort key reading the digit runs of a name as numbers: bag_2 before bag_10."""
-    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", file.name)]
-
-
-def _listed_files(bag: Path, meta: Path) -> list[str]:
-    """The ``relative_file_paths`` entries of a rosbag2 ``metadata.yaml``, as written."""
-    listed: list[str] = []
-    in_list = False
-    for line in meta.read_text(errors="replace").splitlines():
-        stripped = line.strip()
-        if stripped.startswith("relative_file_paths:"):
-            in_list = True
-        elif in_list and stripped.startswith("- "):
-            listed.append(stripped[2:].strip().strip("'\""))
-        elif in_list and stripped:
-            in_list = False
-    return listed
-
-
-def bag_files(path: Path) -> tuple[list[Path], list[str]]:
-    """The storage files of a recording and warnings about them: the file itself, or a rosbag2
-    directory's split files (MCAP, or SQLite ``.db3``).
-
-    A rosbag2 directory lists its files in ``metadata.yaml`` (``relative_file_paths``) in
-    recording order; a listed file that is missing is warned about.  Without the list (a killed
-    recorder leaves none), the directory's ``*.mcap`` files, else its ``*.db3`` files, are
-    taken in natural name order (bag_2 before bag_10).
-
-    Raises:
-        InputError: not a file, empty, a directory without MCAP or .db3 files, a listed path
-            that leaves the directory (absolute or with ``..``), or a split file that is not a
-            regular file (a FIFO, a folder, a dangling link).
-    """
-    if path.is_file():
-        if path.stat().st_size == 0:
-            raise InputError(f"{path}: empty file")
-        return [path], []
-    if not path.is_dir():
-        raise InputError(f"{path}: not a file")
-    warnings: list[str] = []
-    files: list[Path] = []
-    meta = path / "metadata.yaml"
-    if meta.is_file():
-        for entry in _listed_files(path, meta):
-            if Path(entry).is_absolute() or ".." in Path(entry).parts:
-                raise InputError(
-                    f"{meta}: lists {entry!r}, outside the bag directory; refusing to read it"
-                )
-            if not entry.endswith(STORAGE_SUFFIXES):
-                continue
-            if os.path.lexists(path / entry):
-                files.append(path / entry)
-            else:
-                warnings.append(f"{meta.name} lists {entry}, which is missing")
-    for suffix in STORAGE_SUFFIXES:
-        files = files or sorted(path.glob(f"*{suffix}"), key=_natural_key)
-    if not files:
-        raise InputError(f"{path}: a directory without MCAP or .db3 files")
-    for file in files:
-        if not file.is_file():
-            raise InputError(f"{file}: not a regular file (a FIFO, a folder or a broken link?)")
-    return files, warnings
-
-
-STORAGE_SUFFIXES = (".mcap", ".db3")
-"""The storage files of a rosbag2 directory: MCAP, or rosbag2's SQLite storage."""
-
-
-def open_scanner(file: Path, **options: Any) -> McapScanner | Db3Scanner:
-    """The scanner of one storage file: :class:`imupipe.io.db3_scan.Db3Scanner` for an SQLite
-    database (told by its header), else :class:`imupipe.io.mcap_scan.McapScanner`; ``options``
-    as theirs (``wanted``, ``progress``, ``max_chunk_bytes``)."""
-    return (Db3Scanner if is_db3(file) else McapScanner)(file, **options)
-
-
-def mcap_files(path: Path) -> list[Path]:
-    """The storage files of a recording (:func:`bag_files` without its warnings)."""
-    return bag_files(path)[0]
-
-
 def _same_device(
     path: Path, seen: dict[str, dict[str, str]], new: dict[str, dict[str, str]], file: Path
 ) -> None:
@@ -775,25 +692,27 @@ def scan(
         decoders[topic_kind[name]](_CdrMessages(rows, log_time), channels[name])
 
     frame_ids: dict[str, str] = {}  # the header.frame_id of each topic's first message
+    compression, _ = bag_compression(path)
     for file in files:
         offset = done
-        scanner = open_scanner(
+        with opened(
             file,
+            "zstd" if compression == "message" else "",
             progress=progress and (lambda n, o=offset: progress(o + n)),
             max_chunk_bytes=max_chunk_bytes,
-        )
-        report = scanner.report
-        for batch in scanner.cdr_batches(layout):
-            name = report.channels[batch.channel_id].topic
-            if batch.bad:
-                malformed[name] += batch.bad
-            if batch.first is not None:
-                if name not in frame_ids:
-                    frame_ids[name] = _frame_id(batch.first)
-                waiting[name].append((batch.rows, batch.log_time))
-                waiting_rows[name] += len(batch)
-                if waiting_rows[name] >= _DECODE_ROWS or len(waiting[name]) >= _DECODE_BATCHES:
-                    decode_waiting(name)
+        ) as scanner:
+            report = scanner.report
+            for batch in scanner.cdr_batches(layout):
+                name = report.channels[batch.channel_id].topic
+                if batch.bad:
+                    malformed[name] += batch.bad
+                if batch.first is not None:
+                    if name not in frame_ids:
+                        frame_ids[name] = _frame_id(batch.first)
+                    waiting[name].append((batch.rows, batch.log_time))
+                    waiting_rows[name] += len(batch)
+                    if waiting_rows[name] >= _DECODE_ROWS or len(waiting[name]) >= _DECODE_BATCHES:
+                        decode_waiting(name)
         for name in list(waiting):
             decode_waiting(name)
         done += report.file_bytes

@@ -14,8 +14,9 @@ import numpy as np
 
 from imupipe.device.frame_schema import SCHEMA_NAME
 from imupipe.io.db3_scan import Db3Report
-from imupipe.io.decode import IMU_SCHEMA, bag_files, open_scanner
+from imupipe.io.decode import IMU_SCHEMA
 from imupipe.io.mcap_scan import ScanReport
+from imupipe.io.rosbag2 import bag_compression, bag_files, opened
 
 
 @dataclass
@@ -82,15 +83,16 @@ def describe(path: Path) -> RecordingInfo:
     metadata: dict[str, dict[str, str]] = {}
     file_bytes = chunks = 0
     sqlite = False
+    compression, _ = bag_compression(path)
     for file in files:
-        scanner = open_scanner(file)
-        report = scanner.report
-        for batch in scanner.batches():
-            info = _topic(topics, report, batch.channel_id)
-            info.messages += len(batch)
-            lo, hi = int(np.min(batch.log_time)), int(np.max(batch.log_time))
-            info.start_ns = lo if info.start_ns is None else min(info.start_ns, lo)
-            info.end_ns = hi if info.end_ns is None else max(info.end_ns, hi)
+        with opened(file, "zstd" if compression == "message" else "") as scanner:
+            report = scanner.report
+            for batch in scanner.batches():
+                info = _topic(topics, report, batch.channel_id)
+                info.messages += len(batch)
+                lo, hi = int(np.min(batch.log_time)), int(np.max(batch.log_time))
+                info.start_ns = lo if info.start_ns is None else min(info.start_ns, lo)
+                info.end_ns = hi if info.end_ns is None else max(info.end_ns, hi)
         for channel_id in report.channels:  # channels without readable messages too
             _topic(topics, report, channel_id)
         file_bytes += report.file_bytes

@@ -8,14 +8,17 @@ from __future__ import annotations
 
 import shutil
 import sqlite3
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin
 from rosbags.rosbag2 import Reader as Rosbag2Reader
+from rosbags.rosbag2 import Writer as Rosbag2Writer
 
 from imupipe.errors import InputError
-from imupipe.io import db3_scan
+from imupipe.io import db3_scan, rosbag2
 from imupipe.io.decode import IMU_SCHEMA, decode
 from imupipe.io.info import describe
 from imupipe.testing.busy_bag import (
@@ -123,8 +126,8 @@ def test_unreadable_rows_are_skipped_and_counted(tmp_path: Path, db3_bag: Path) 
     np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps[3:])
     np.testing.assert_array_equal(rec.frames["gyro_y"].to_numpy()[-5:], axes[-5:, 1])
     assert rec.warnings == [
-        "3 message(s) skipped unread (larger than the memory budget allows, or no binary "
-        "payload with an integer timestamp)"
+        "3 message(s) skipped unread (larger than the memory budget allows, or no readable "
+        "binary payload with an integer timestamp)"
     ]
 
 
@@ -179,3 +182,65 @@ def test_a_database_damaged_part_way_keeps_what_precedes_the_damage(
     cut.write_bytes(db3.read_bytes()[: size // 2])
     with pytest.raises(InputError, match=r"cut\.db3: not a readable rosbag2 database \(database"):
         decode(cut)
+
+
+@pytest.mark.parametrize("storage", ["SQLITE3", "MCAP"])
+@pytest.mark.parametrize("mode", ["FILE", "MESSAGE"])
+def test_bags_compressed_by_rosbag2_read_as_rosbags_reads_them(
+    tmp_path: Path, storage: str, mode: str
+) -> None:
+    """rosbag2's own compression (zstd), as rosbags writes it: each split file compressed whole
+    (``bag.db3.zstd``, ``bag.mcap.zstd``: inflated into a temporary file while read) or each
+    message's payload (SQLite: inflated message by message; MCAP: refused in one line)."""
+    imu = imu_stream(TOPICS[0], SECONDS, 200, seed=5)
+    bag = tmp_path / "bag"
+    writer = Rosbag2Writer(bag, version=8, storage_plugin=getattr(StoragePlugin, storage))
+    writer.set_compression(getattr(CompressionMode, mode), CompressionFormat.ZSTD)
+    with writer:
+        connection = writer.add_connection(imu.topic, imu.msgtype, typestore=TYPESTORE)
+        for t, payload in zip(imu.log_time.tolist(), imu.payloads, strict=True):
+            writer.write(connection, t, payload)
+    if storage == "MCAP" and mode == "MESSAGE":
+        with pytest.raises(InputError, match=r"bag\.mcap: MCAP compressed message by message"):
+            decode(bag)
+        return
+    rec = decode(bag)
+    stamps, axes = rosbags_imu(bag, TOPICS[0])
+    assert rec.frames.height == len(stamps) == 300
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
+    ours = rec.frames.select(AXES).to_numpy()
+    np.testing.assert_array_equal(ours.view(np.uint64), axes.view(np.uint64))
+    assert rec.warnings == []
+    assert describe(bag).topics[0].messages == 300
+
+
+def test_a_compressed_file_that_does_not_inflate_is_one_line(tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text(
+        "rosbag2_bagfile_information:\n  compression_format: zstd\n  compression_mode: file\n"
+        "  relative_file_paths:\n  - bag_0.db3.zstd\n"
+    )
+    (bag / "bag_0.db3.zstd").write_bytes(b"not zstd at all")
+    with pytest.raises(InputError, match=r"bag_0\.db3\.zstd: cannot decompress it \(zstd: "):
+        decode(bag)
+
+
+def test_a_file_that_would_inflate_past_the_free_disk_is_refused(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """A decompression bomb stops at a share of the temporary directory's free space."""
+    imu = imu_stream(TOPICS[0], SECONDS, 200, seed=5)
+    bag = tmp_path / "bag"
+    writer = Rosbag2Writer(bag, version=8, storage_plugin=StoragePlugin.SQLITE3)
+    writer.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
+    with writer:
+        connection = writer.add_connection(imu.topic, imu.msgtype, typestore=TYPESTORE)
+        for t, payload in zip(imu.log_time.tolist(), imu.payloads, strict=True):
+            writer.write(connection, t, payload)
+    monkeypatch.setattr(rosbag2, "FREE_DISK_SHARE", 1e-15)
+    with pytest.raises(
+        InputError, match=r"bag\.db3\.zstd: inflates beyond 0% of the free space of "
+    ):
+        decode(bag)
+    assert not list(Path(tempfile.gettempdir()).glob("imupipe-inflated-*/bag.db3"))

@@ -65,6 +65,7 @@ import sys
 from pathlib import Path
 import polars as pl
 import imupipe.io.decode as dec
+from imupipe.io.mcap_scan import McapScanner
 from imupipe.io.columns import release_freed_memory
 
 def status(key):
@@ -74,7 +75,7 @@ def status(key):
 dec._CHUNK = 1 << 16  # temporaries of 0.5 MB: the fixed costs stay small next to 24 MB columns
 pl.repeat(None, 1, dtype=pl.UInt32, eager=True)  # polars' first call commits ~9 MB (once)
 next(  # so does loading the compiled walks (numba, LLVM): ~40 MB, once
-    dec.McapScanner(Path(sys.argv[1])).cdr_batches(
+    McapScanner(Path(sys.argv[1])).cdr_batches(
         lambda c, s: dec.LAYOUTS["imu"] if s.name == dec.IMU_SCHEMA else None
     )
 )
