@@ -8,7 +8,8 @@ fsspec's local file system too, so one set of rules covers both:
 - a file named on the command line (or matched by a glob) is a recording, whatever its
   extension (a file that is not MCAP then fails as that unit, with its one-line error);
 - a directory holding ``metadata.yaml`` is a rosbag2 recording;
-- any other directory is searched recursively for ``*.mcap`` files and rosbag2 directories.
+- any other directory is searched recursively for ``*.mcap`` and ``*.db3`` files (rosbag2's
+  SQLite storage) and rosbag2 directories.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import fsspec
 from fsspec.implementations.local import LocalFileSystem
 
 from imupipe.errors import FleetError
+from imupipe.io.rosbag2 import STORAGE_SUFFIXES
 
 ROSBAG2_METADATA = "metadata.yaml"
 _GLOB_CHARS = re.compile(r"[*?\[]")
@@ -63,7 +65,7 @@ def _walk(fs: fsspec.AbstractFileSystem, root: str) -> list[tuple[str, bool]]:
     found += [(b, True) for b in bags]
     for f in files:
         inside_bag = any(f.startswith(b + "/") for b in bags)
-        if f.endswith(".mcap") and not inside_bag:
+        if f.endswith(STORAGE_SUFFIXES) and not inside_bag:
             found.append((f, False))
     return found
 
@@ -88,12 +90,12 @@ def _expand(spec: str) -> list[tuple[fsspec.AbstractFileSystem, str, bool]]:
 
 
 def _name_parts(path: str) -> list[str]:
-    """The path's components, innermost first (the file or directory name without ``.mcap``,
-    then its folders outwards), each made safe for a folder name: characters outside
+    """The path's components, innermost first (the file or directory name without ``.mcap`` or
+    ``.db3``, then its folders outwards), each made safe for a folder name: characters outside
     ``[A-Za-z0-9._-]`` replaced by ``_``, no leading dot; empty ones dropped."""
     parts = path.rstrip("/").split("/")[::-1]
-    if parts[0].endswith(".mcap"):
-        parts[0] = parts[0][: -len(".mcap")]
+    for suffix in STORAGE_SUFFIXES:
+        parts[0] = parts[0].removesuffix(suffix)
     safe = [_UNSAFE.sub("_", part).lstrip(".") for part in parts]
     return [part for part in safe if part] or ["unit"]
 

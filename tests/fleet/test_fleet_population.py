@@ -413,11 +413,13 @@ def test_discover_files_bags_folders_globs(tmp_path):
     (bag / "robot 7_0.mcap").write_bytes(b"x")
     (tmp_path / "site" / "a.mcap").write_bytes(b"x")
     (tmp_path / "site" / "notes.txt").write_text("not a recording")
+    (tmp_path / "site" / "humble.db3").write_bytes(b"x")  # rosbag2's SQLite storage, bare
     recs = discover([str(tmp_path / "site"), str(tmp_path / "*.mcap"), str(tmp_path / "a.mcap")])
     # the bag once (not its split file), the nested a.mcap, the top a.mcap once (glob + file)
     assert [(r.name, r.is_dir, r.local) for r in recs] == [
         ("robot_7", True, True),
         ("site_a", False, True),  # two a.mcap: told apart by their folders
+        ("humble", False, True),
         (f"{tmp_path.name}_a", False, True),
     ]
     assert recs[0].location == str(bag)
