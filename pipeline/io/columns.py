@@ -33,6 +33,8 @@ import polars as pl
 from mcap.reader import make_reader
 
 from imupipe.errors import InputError
+from imupipe.io import db3_scan
+from imupipe.io.db3_scan import is_db3
 from imupipe.io.decode import ImuRecording, ScannedRecording, decode, scan
 from imupipe.io.mcap_scan import chunk_limit
 from imupipe.io.rosbag2 import storage_files
@@ -62,12 +64,15 @@ ENVELOPE_BINS = 100_000
 
 
 def message_count(file: Path) -> int:
-    """Messages in ``file`` from its MCAP summary statistics, else estimated from its size."""
+    """Messages in ``file`` from its MCAP summary statistics or its rosbag2 database's count,
+    else estimated from its size."""
     try:
+        if is_db3(file):
+            return db3_scan.message_count(file)
         with open(file, "rb") as f:
             stats = make_reader(f).get_summary().statistics
         return int(stats.message_count)
-    except Exception:  # damaged or summary-less file: estimate from its size
+    except Exception:  # damaged, summary-less or compressed file: estimate from its size
         return file.stat().st_size // FALLBACK_BYTES_PER_FRAME
 
 

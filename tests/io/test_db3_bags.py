@@ -19,6 +19,7 @@ from rosbags.rosbag2 import Writer as Rosbag2Writer
 
 from imupipe.errors import InputError
 from imupipe.io import db3_scan, rosbag2
+from imupipe.io.columns import message_count
 from imupipe.io.decode import IMU_SCHEMA, decode
 from imupipe.io.info import describe
 from imupipe.testing.busy_bag import (
@@ -95,6 +96,8 @@ def test_describe_counts_every_topic_of_a_db3_bag(db3_bag: Path, streams) -> Non
         for s in streams
     }
     assert info.damage == []
+    # the memory budget's estimate counts the database's rows (not file bytes / 40: 10x more)
+    assert message_count(next(db3_bag.glob("*.db3"))) == sum(len(s.log_time) for s in streams)
     assert (
         info.lines()[0]
         == f"{db3_bag}: {info.file_bytes / 1e6:.1f} MB, rosbag2 SQLite storage (.db3)"
