@@ -1464,23 +1464,37 @@ MAX_HARMONIC = 5
 """Harmonic orders searched for each modelled line (2 … this)."""
 
 
-def harmonic_order(f: float, f1: float) -> int | None:
-    """n when ``f`` (Hz) lies within 2 % of n·``f1``, n = 2 … :data:`MAX_HARMONIC`, else
-    ``None`` (a line at 17.7 × f1 is no harmonic: at that order any frequency is near one)."""
-    n = round(f / f1)
-    return n if 2 <= n <= MAX_HARMONIC and abs(f / (n * f1) - 1) < 0.02 else None
+def folded(f: float, tau0: float) -> float:
+    """Where a line at ``f`` Hz lies in the spectrum of samples every ``tau0`` s: |f − k/τ0|
+    for the nearest integer k, in [0, 1/(2 τ0)] (a line above the Nyquist frequency gives the
+    very samples of its fold)."""
+    fs = 1.0 / tau0
+    return abs(f - fs * round(f / fs))
+
+
+def harmonic_order(f: float, f1: float, tau0: float | None = None) -> int | None:
+    """n when ``f`` (Hz) lies within 2 % of n·``f1``, n = 2 … :data:`MAX_HARMONIC` — of n·f1
+    :func:`folded` into the band of samples every ``tau0`` s when given (a 31 Hz line's third
+    harmonic, 93 Hz, is sampled at 100 Hz as a 7 Hz line) — else ``None`` (a line at 17.7 × f1
+    is no harmonic: at that order any frequency is near one)."""
+    for n in range(2, MAX_HARMONIC + 1):
+        h = n * f1 if tau0 is None else folded(n * f1, tau0)
+        if h > 0 and abs(f / h - 1) < 0.02:
+            return n
+    return None
 
 
 def _harmonic_specs(ax: _Axis, state: _State) -> list[tuple[float, float]]:
-    """(centre Hz, width Hz) of the harmonics n·f1 (n = 2 … :data:`MAX_HARMONIC`) of every
-    modelled line (a sinusoid or a narrowband line that is no harmonic of another) whose AVAR
-    peak 0.371/(n·f1) lies in the fitted range, below 0.8 × Nyquist, and not within 10 % of a
-    modelled line.  A line whose frequency wanders by δf carries harmonics that wander by n·δf,
-    so the n-th harmonic's width is n·w1: w1 the narrowband line's, or the sinusoid's width in
-    the spectrum (:func:`_spectral_width`; the AVAR cannot tell a tone from a line 1e-3 of its
-    frequency wide, the spectrum can), at least one frequency bin 1/T.  Measured on the real
-    ADIS16405 accel_x and accel_y: fundamental 0.5667 Hz, 1.7 and 1.9 mHz wide; its third
-    harmonic 1.698 Hz, 4.6 and 6.2 mHz wide (Whittle fits of the periodogram)."""
+    """(centre Hz, width Hz) of the harmonics n·f1 (n = 2 … :data:`MAX_HARMONIC`), folded into
+    the sampled band (:func:`folded`: a harmonic above the Nyquist frequency is sampled as its
+    alias), of every modelled line (a sinusoid or a narrowband line that is no harmonic of
+    another) whose AVAR peak 0.371/f lies in the fitted range, below 0.8 × Nyquist, and not
+    within 10 % of a modelled line.  A line whose frequency wanders by δf carries harmonics
+    that wander by n·δf, so the n-th harmonic's width is n·w1: w1 the narrowband line's, or the
+    sinusoid's width in the spectrum (:func:`_spectral_width`; the AVAR cannot tell a tone from
+    a line 1e-3 of its frequency wide, the spectrum can), at least one frequency bin 1/T.
+    Measured on the real ADIS16405 accel_x and accel_y: fundamental 0.5667 Hz, 1.7 and 1.9 mHz
+    wide; its third harmonic 1.698 Hz, 4.6 and 6.2 mHz wide (Whittle fits of the periodogram)."""
     lines = {
         s[0]: (s[1] if kind == "narrowband" else _spectral_width(ax, state, s[0]))
         for kind, s in state.effect_parameters.values()
@@ -1490,12 +1504,12 @@ def _harmonic_specs(ax: _Axis, state: _State) -> list[tuple[float, float]]:
     bin_hz = 1.0 / (len(ax.sig.y) * ax.sig.tau0)
     specs: list[tuple[float, float]] = []
     for f1, w1 in lines.items():
-        if any(harmonic_order(f1, g) for g in lines):
+        if any(harmonic_order(f1, g, ax.sig.tau0) for g in lines):
             continue
         for n in range(2, MAX_HARMONIC + 1):
-            f = n * f1
+            f = folded(n * f1, ax.sig.tau0)  # 0: a multiple of the sample rate, sampled flat
             taken = list(lines) + [c for c, _ in specs]
-            if f < 0.4 / ax.sig.tau0 and 0.371 / f >= ax.tau_min and _apart(f, taken):
+            if 0 < f < 0.4 / ax.sig.tau0 and 0.371 / f >= ax.tau_min and _apart(f, taken):
                 specs.append((float(f), float(max(n * w1, bin_hz))))
     return specs
 
@@ -1548,8 +1562,9 @@ def _harmonic_trial(
          if s[0] == f1),
         None,
     )  # fmt: skip
-    if interval:  # the centre is n·f1 exactly: its interval n times f1's
-        cand.intervals["frequency_hz"] = [cand.evidence["harmonic"] * f for f in interval]
+    if interval:  # the centre is n·f1 exactly (folded): its interval n times f1's, folded
+        ends = (folded(cand.evidence["harmonic"] * f, ax.sig.tau0) for f in interval)
+        cand.intervals["frequency_hz"] = sorted(ends)
     penalty = 2.0 * np.log(len(specs))
     trial = _column_trial(ax, state, current, name, cand, [(spec, fit_new)], errors, penalty)
     return replace(trial, kind=f"{name} harmonic")  # its own record next to the searched line's
@@ -1908,9 +1923,9 @@ def _column_candidate(kind, spec, fit_new, state, ax) -> effects.Candidate:
         params = {"frequency_hz": spec[0], "width_hz": spec[1], "rms": amp}
         evidence = {"avar_peak_tau_s": 0.371 / spec[0], "shape": spec}
         for f1 in state.line_frequencies:
-            if order := harmonic_order(spec[0], f1):
+            if order := harmonic_order(spec[0], f1, ax.sig.tau0):
                 evidence["harmonic_of_hz"], evidence["harmonic"] = f1, order
-            elif order := harmonic_order(f1, spec[0]):  # found after its stronger harmonic
+            elif order := harmonic_order(f1, spec[0], ax.sig.tau0):  # after its stronger one
                 evidence["fundamental_of_hz"], evidence["its_harmonic"] = f1, order
         return effects.Candidate(
             kind, params, {"rms": interval}, evidence, column=column, n_params=n_params
