@@ -13,6 +13,7 @@ recorder does by default: rosbag2's SQLite storage, written by rosbags' rosbag2 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -271,6 +272,18 @@ def write_rosbag2_db3(directory: Path, streams: list[Stream]) -> Path:
             k = which[j]
             writer.write(connections[k], times[j], streams[k].payloads[index[j]])
     return next(directory.glob("*.db3"))
+
+
+def rosbags_imu_values(payloads: Iterable[bytes]) -> tuple[np.ndarray, np.ndarray]:
+    """(header stamps ns int64, (n, 6) gyro + accel float64) of serialised ``Imu`` messages as
+    rosbags' CDR deserialiser reads them: the reference the decoders are tested against."""
+    stamps, axes = [], []
+    for raw in payloads:
+        msg = TYPESTORE.deserialize_cdr(raw, "sensor_msgs/msg/Imu")
+        w, a = msg.angular_velocity, msg.linear_acceleration
+        stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+        axes.append([w.x, w.y, w.z, a.x, a.y, a.z])
+    return np.array(stamps, np.int64), np.array(axes, np.float64).reshape(-1, 6)
 
 
 def write_robot_bag(directory: Path, seconds: float = 300.0, rate_hz: float = 100.0) -> Path:

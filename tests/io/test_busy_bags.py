@@ -35,6 +35,7 @@ from imupipe.testing.busy_bag import (
     adis_stream,
     imu_stream,
     other_streams,
+    rosbags_imu_values,
     write_bag,
     write_rosbag2,
 )
@@ -47,14 +48,9 @@ SECONDS = 1.5
 
 def rosbags_imu(path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
     """(stamps ns int64, (n, 6) gyro+accel float64) of ``topic`` as rosbags decodes them."""
-    stamps, axes = [], []
     with open(path, "rb") as f:
-        for _, _, message in make_reader(f).iter_messages(topics=[topic]):
-            msg = TYPESTORE.deserialize_cdr(message.data, IMU_SCHEMA)
-            w, a = msg.angular_velocity, msg.linear_acceleration
-            stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
-            axes.append([w.x, w.y, w.z, a.x, a.y, a.z])
-    return np.array(stamps, np.int64), np.array(axes, np.float64)
+        messages = make_reader(f).iter_messages(topics=[topic])
+        return rosbags_imu_values(message.data for _, _, message in messages)
 
 
 def longest_run(path: Path) -> int:

@@ -20,12 +20,13 @@ from rosbags.rosbag2 import Writer as Rosbag2Writer
 from imupipe.errors import InputError
 from imupipe.io import db3_scan, rosbag2
 from imupipe.io.columns import message_count
-from imupipe.io.decode import IMU_SCHEMA, decode
+from imupipe.io.decode import decode
 from imupipe.io.info import describe
 from imupipe.testing.busy_bag import (
     TYPESTORE,
     imu_stream,
     other_streams,
+    rosbags_imu_values,
     write_rosbag2,
     write_rosbag2_db3,
 )
@@ -37,15 +38,9 @@ SECONDS = 1.5
 
 def rosbags_imu(bag: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
     """(stamps ns int64, (n, 6) gyro+accel float64) of ``topic`` as rosbags' reader gives them."""
-    stamps, axes = [], []
     with Rosbag2Reader(bag) as reader:
         wanted = [c for c in reader.connections if c.topic == topic]
-        for _, _, raw in reader.messages(connections=wanted):
-            msg = TYPESTORE.deserialize_cdr(raw, IMU_SCHEMA)
-            w, a = msg.angular_velocity, msg.linear_acceleration
-            stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
-            axes.append([w.x, w.y, w.z, a.x, a.y, a.z])
-    return np.array(stamps, np.int64), np.array(axes, np.float64)
+        return rosbags_imu_values(raw for _, _, raw in reader.messages(connections=wanted))
 
 
 @pytest.fixture(scope="module")
