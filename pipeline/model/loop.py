@@ -959,13 +959,15 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         rejected.pop(chosen.trial.kind, None)
         if chosen.trial.fit_start is not None:  # a short-τ line: the range grows from here on
             ax.tau_min, note = chosen.trial.fit_start
-            ax.fit_note = f"{note} (with the {chosen.trial.cand.params['frequency_hz']:.4g} Hz "
-            ax.fit_note += "narrowband line below the baseline's fit start modelled)"
+            lines = [c for c in (chosen.trial.cand, chosen.trial.joint) if c is not None]
+            hz = " and ".join(f"{c.params['frequency_hz']:.4g} Hz" for c in lines)
+            ax.fit_note = f"{note} (with the {hz} narrowband line{'s' * (len(lines) > 1)} "
+            ax.fit_note += "below the baseline's fit start modelled)"
             good = goodness(state.fit(ax), tau, state.avar, edf)  # error before, same τ
         state = chosen.trial.state
         new_fit = state.fit(ax)
         new_good = goodness(new_fit, tau, state.avar, edf)
-        accepted.append(chosen.accepted(good.error, new_good.error))
+        accepted.extend(chosen.accepted(good.error, new_good.error))
         fit, good = new_fit, new_good
     terms1 = terms0 if fit is fit0 else state.terms(ax)
     time_before = ax.time_fit(fit0, {}, ax.y_d).error
@@ -1597,7 +1599,9 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
     comparison cover the same τ; a line that does not widen the range (another line below the
     fit start still bends the short τ: 12 and 31 Hz lines at 100 Hz, neither found before) is
     judged on the current range, which its AVAR tail reaches, and with it modelled the other
-    may widen the range in the next round.  Returns the trial of largest margin; ``None`` when
+    may widen the range in the next round.  When no line widens the range alone, the two
+    strongest periodogram lines are also tried as a pair (:func:`_short_lines_joint`: a 31 Hz
+    line with its harmonic sampled at 7 Hz).  Returns the trial of largest margin; ``None`` when
     the fit already starts at the first τ, no line slot is left or no new line is refined."""
     tau, edf = ax.tau, ax.edf
     name = _column_name("narrowband", state)
@@ -1625,6 +1629,10 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
         taken = [*state.line_frequencies, *(t.cand.params["frequency_hz"] for t in trials)]
         if _apart(refined[0][0], taken):
             trials.append(_short_line_judged(ax, full, state, name, refined))
+    lines = [t.cand.params["frequency_hz"] for t in trials[: len(starts) - 1]]  # the spectrum's
+    if len(lines) >= 2 and all(t.fit_start is None for t in trials):
+        joint = _short_lines_joint(ax, full, state, name, lines[:2], cutoff)
+        trials += [joint] if joint is not None else []
     return max(trials, key=lambda t: t.margin, default=None)
 
 
@@ -1671,6 +1679,75 @@ def _short_line_judged(
     key = f"{name} below the fit start"  # its own record next to the in-range line's
     return Trial(key, cand, float(dbic - DELTA_BIC), flags_ok, new_state, holdout,
                  fit_start=(tau_min, note) if widens else None)  # fmt: skip
+
+
+def _short_lines_joint(
+    ax: _Axis, full: _Axis, state: _State, name: str, lines: list[float], cutoff: float
+) -> Trial | None:
+    """Two lines below the fit start, the periodogram's two strongest, that widen the fitted
+    range only together: each alone leaves the other's AVAR bump among the short τ, so the fit
+    start stays and each is judged on the current range, where its tail is short of ΔBIC 10 (a
+    31 Hz vibration with its 93 Hz harmonic, 2× the white noise, sampled at 7 Hz at 100 Hz:
+    nothing found, N 1.67× high).  Both are refined (the second with the first modelled) and
+    judged as one term of 2 × 3 parameters on the range the fit start chooses with both; the
+    hold-out checks each with the other modelled.  ``None`` when no second slot is left or the
+    pair does not widen the range either."""
+    tau, edf = ax.tau, ax.edf
+
+    def refined(f: float, beside: _State) -> tuple[effects.Candidate, list]:
+        spec, fits, fit_line, centre = _narrowband_refine(full, beside, (f,), cutoff)
+        cand = _column_candidate("narrowband", spec, fit_line, beside, full)
+        cand.evidence["spectrum_centre"] = centre
+        cand.intervals |= _spectrum_intervals(centre)
+        return cand, fits
+
+    first, _ = refined(lines[0], state)
+    second_name = _column_name("narrowband", state.with_column(name, first))
+    if second_name is None:
+        return None
+    second, fits_second = refined(lines[1], state.with_column(name, first))
+    first, fits_first = refined(lines[0], state.with_column(second_name, second))  # its rms
+    cands, fits_of = [first, second], [fits_first, fits_second]  # beside the second's
+    modelled = state.with_column(name, first).with_column(second_name, second)
+    tau_min, note = ieee952.fit_start(
+        tau,
+        state.avar,
+        edf,
+        modelled.columns,
+        flicker_max=ieee952.flicker_limit(ax.avar_hi(state.avar)),
+        dense_from=ax.dense_from,
+    )
+    if not tau_min < ax.tau_min * (1 - 1e-9):
+        return None
+    wide = _with_start(ax, tau_min)
+    fit_old = state.fit(wide)
+    good_old = goodness(fit_old, tau, state.avar, edf)
+    k = 2 * (N_SHAPE["narrowband"] + 1)
+    dbic, flags_ok = _judge("narrowband", modelled.fit(wide), fit_old, good_old, k, tau,
+                            state.avar, edf)  # fmt: skip
+    for cand, fits, other in zip(cands, fits_of, cands[::-1], strict=True):
+        cand.evidence |= {
+            "avar_delta_bic": dbic,
+            "fit_start_s": [ax.tau_min, tau_min],
+            "found_with_hz": other.params["frequency_hz"],
+        }
+        if dbic >= DELTA_BIC:
+            cand.intervals |= _column_profile(
+                "narrowband", fits, state.avar, edf, (ax.sig.tau0, ax.n_terms)
+            )
+            cand.evidence |= _spectrum_view(ax, state, cand)
+
+    def holdout() -> dict:  # each line with the other one modelled
+        each = [
+            _holdout_column(wide, state.with_column(name, first), second),
+            _holdout_column(wide, state.with_column(second_name, second), first),
+        ]
+        gains = [g for h in each for g in h["deviance_gain_heldout"]]
+        return {"holds": all(h["holds"] for h in each), "deviance_gain_heldout": gains}
+
+    key = f"{name} below the fit start, with a second line"
+    return Trial(key, first, float(dbic - DELTA_BIC), flags_ok, modelled, holdout,
+                 fit_start=(tau_min, note), joint=second)  # fmt: skip
 
 
 def _unmodelled_line(
@@ -1726,6 +1803,9 @@ class Trial:
     """(τ_min s, note) of the wider fitted range a short-τ line was judged on
     (:func:`_short_line_trial`, whose errors are not measured: an AVAR-only line is judged
     by ΔBIC, hold-out, flags and the spectrum); ``None``: the loop's current range."""
+    joint: effects.Candidate | None = None
+    """A second line added with ``cand`` (:func:`_short_lines_joint`: two lines below the fit
+    start that widen the range only together); ``None``: ``cand`` alone."""
 
 
 @dataclass(frozen=True)
@@ -1810,9 +1890,16 @@ class Decision:
             "evidence": cand.evidence | {"holdout": self.holdout},
         }
 
-    def accepted(self, error_before: float, error_after: float) -> AcceptedEffect:
-        """The record of an accepted effect, with the error before and after adding it."""
-        return AcceptedEffect(**self._record(), error_before=error_before, error_after=error_after)
+    def accepted(self, error_before: float, error_after: float) -> list[AcceptedEffect]:
+        """The records of the accepted effect (and of the line added with it,
+        :attr:`Trial.joint`), with the error before and after adding them."""
+        records = [self._record()]
+        if (joint := self.trial.joint) is not None:
+            evidence = joint.evidence | {"holdout": self.holdout}
+            records.append(records[0] | {"params": joint.params, "intervals": joint.intervals,
+                                         "evidence": evidence})  # fmt: skip
+        errors = {"error_before": error_before, "error_after": error_after}
+        return [AcceptedEffect(**r, **errors) for r in records]
 
     def rejected(self) -> RejectedCandidate:
         """The record of a candidate not added."""

@@ -189,14 +189,16 @@ def test_decision_records_are_what_report_json_shows():
         "avar_delta_bic": 11.0,
         "holdout": {"holds": True, "deviance_gain_heldout": [1.0, 1.0]},
     }
-    assert d.accepted(1.5, 1.25) == AcceptedEffect(
-        "sinusoid",
-        {"frequency_hz": 0.02},
-        {"frequency_hz": [0.019, 0.021]},
-        evidence,
-        error_before=1.5,
-        error_after=1.25,
-    )
+    assert d.accepted(1.5, 1.25) == [
+        AcceptedEffect(
+            "sinusoid",
+            {"frequency_hz": 0.02},
+            {"frequency_hz": [0.019, 0.021]},
+            evidence,
+            error_before=1.5,
+            error_after=1.25,
+        )
+    ]
     rejected = _decide(_trial(flags_ok=False)[0]).rejected()
     assert rejected == RejectedCandidate(
         "sinusoid",

@@ -732,3 +732,36 @@ def test_an_aliased_harmonic_is_named_the_harmonic_of_its_line(paper_gyro):
     assert lines[7].evidence["harmonic"] == 3
     assert lines[7].params["rms"] == pytest.approx(w / np.sqrt(2), rel=0.05)
     assert looped.terms_after.random_walk.value == pytest.approx(paper_gyro.n, rel=0.01)
+
+
+def test_two_lines_that_widen_the_range_only_together_are_found_together(paper_gyro):
+    """1 h at 100 Hz under a 31 Hz tone (10× the white noise's deviation) and its 93 Hz third
+    harmonic at 2×, sampled at 7 Hz: the baseline's fit starts at 0.16 s, each line alone leaves
+    the other's bump among the short τ and falls short on the current range, so nothing was
+    found and N came out 1.67× high.  Judged as a pair on the range both open: found in one
+    round, the 7 Hz line named the third harmonic, each line's rms within 1 %, N within 1 %."""
+    tau0, n = 0.01, 360_000
+    rng = np.random.default_rng(1)
+    w = paper_gyro.n / np.sqrt(tau0)
+    t = np.arange(n) * tau0
+    y = paper_gyro.rate(n, tau0, rng)
+    y += 10 * w * np.sin(2 * np.pi * 31 * t) + 2 * w * np.sin(2 * np.pi * 93 * t)
+    looped = close_loop(
+        AxisSignals("gyro_x", "gyro", y, tau0, None, None), allan_curves([y], tau0)[0]
+    )
+    assert looped.terms_before.fit_tau_min_s == pytest.approx(0.16)
+    lines = {round(e.params["frequency_hz"]): e for e in looped.accepted}
+    assert sorted(lines) == [7, 31]
+    assert lines[31].evidence["found_with_hz"] == pytest.approx(7.0, abs=1e-3)
+    assert lines[7].evidence["found_with_hz"] == pytest.approx(31.0, abs=1e-3)
+    assert lines[7].evidence["harmonic"] == 3
+    assert (lines[7].error_before, lines[7].error_after) == (
+        lines[31].error_before,
+        lines[31].error_after,
+    )  # one round, one error change
+    assert lines[31].params["rms"] == pytest.approx(10 * w / np.sqrt(2), rel=0.01)
+    assert lines[7].params["rms"] == pytest.approx(2 * w / np.sqrt(2), rel=0.01)
+    assert looped.terms_after.fit_tau_min_s == pytest.approx(tau0)
+    assert "the 31 Hz and 7 Hz narrowband lines below" in looped.terms_after.fit_note
+    assert looped.terms_after.random_walk.value == pytest.approx(paper_gyro.n, rel=0.01)
+    assert looped.after.p_value > 0.5
