@@ -8,14 +8,16 @@ The rosbag2 SQLite schema (rosbag2_storage_default_plugins, ``sqlite_storage.cpp
 timestamp, data)`` whose ``data`` is the serialised message (CDR, as in an MCAP Message record)
 and ``timestamp`` the receive time in ns (an MCAP log time).  Messages are read in ``id`` order —
 the order the recorder wrote them (``id`` is the table's rowid), as an MCAP file's — a block of
-:data:`BLOCK_ROWS` at a time,
-only the wanted topics' rows, and a message's CDR fields are copied out by the same compiled
-kernel as a chunk's (:func:`imupipe.io.mcap_walk.cdr_rows`, over the block's payloads joined).
+:data:`BLOCK_ROWS` at a time, only the wanted topics' rows, and a message's CDR fields are copied
+out by the same compiled kernel as a chunk's (:func:`imupipe.io.mcap_walk.cdr_rows`, over the
+block's payloads joined).  Payloads compressed one by one (rosbag2's ``compression_mode:
+message``) are inflated here; whole compressed files are inflated before
+(:mod:`imupipe.io.rosbag2`).
 
 The file is opened read-only; its strings (topic names, types) reach the outputs escaped like an
 MCAP file's.  A payload longer than ``max_chunk_bytes``, or one that is no blob (SQLite's types
-are the writer's choice), is not read (counted as damage), and a database that turns out
-damaged part way keeps every block read before, with a warning.
+are the writer's choice) or does not inflate, is not read (counted as damage), and a database
+that turns out damaged part way keeps every message read before, with a warning.
 """
 
 from __future__ import annotations

@@ -242,3 +242,24 @@ def test_a_file_that_would_inflate_past_the_free_disk_is_refused(
     ):
         decode(bag)
     assert not list(Path(tempfile.gettempdir()).glob("imupipe-inflated-*/bag.db3"))
+
+
+def test_a_message_that_does_not_inflate_is_skipped_and_counted(tmp_path: Path) -> None:
+    """Per-message compression: a payload that is no zstd frame is one skipped message."""
+    imu = imu_stream(TOPICS[0], SECONDS, 200, seed=5)
+    bag = tmp_path / "bag"
+    writer = Rosbag2Writer(bag, version=8, storage_plugin=StoragePlugin.SQLITE3)
+    writer.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    with writer:
+        connection = writer.add_connection(imu.topic, imu.msgtype, typestore=TYPESTORE)
+        for t, payload in zip(imu.log_time.tolist(), imu.payloads, strict=True):
+            writer.write(connection, t, payload)
+    with sqlite3.connect(next(bag.glob("*.db3"))) as db:
+        db.execute("UPDATE messages SET data = x'00112233' WHERE id = 10")
+    rec = decode(bag)
+    stamps, _ = rosbags_imu_values(imu.payloads)
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), np.delete(stamps, 9))
+    assert rec.warnings == [
+        "1 message(s) skipped unread (larger than the memory budget allows, or no readable "
+        "binary payload with an integer timestamp)"
+    ]
