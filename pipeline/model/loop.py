@@ -1624,12 +1624,13 @@ def _short_line_trial(ax: _Axis, state: _State) -> Trial | None:
         starts.append(line["frequency_hz"])
     starts.append(_best(seeds)[0][0])  # after the lines: kept where it refines elsewhere
     trials: list[Trial] = []
-    for f in starts:
+    lines: list[float] = []  # the refined lines of the periodogram's seeds
+    for k, f in enumerate(starts):
         refined = _narrowband_refine(full, state, (f,), cutoff)
         taken = [*state.line_frequencies, *(t.cand.params["frequency_hz"] for t in trials)]
         if _apart(refined[0][0], taken):
             trials.append(_short_line_judged(ax, full, state, name, refined))
-    lines = [t.cand.params["frequency_hz"] for t in trials[: len(starts) - 1]]  # the spectrum's
+            lines += [refined[0][0]] if k < len(starts) - 1 else []
     if len(lines) >= 2 and all(t.fit_start is None for t in trials):
         joint = _short_lines_joint(ax, full, state, name, lines[:2], cutoff)
         trials += [joint] if joint is not None else []
