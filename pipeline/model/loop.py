@@ -1647,29 +1647,17 @@ def _short_line_judged(
     """The :func:`_short_line_trial` of one refined line (:func:`_narrowband_refine` on the
     range ``full`` from the first τ): judged on the range the fit start chooses with it, or on
     the current range when it does not widen it."""
-    tau, edf = ax.tau, ax.edf
+    edf = ax.edf
     spec, fits, fit_line, centre = refined
     cand = _column_candidate("narrowband", spec, fit_line, state, full)
     cand.evidence["spectrum_centre"] = centre  # the centre is the spectrum's, as in the range
     cand.intervals |= _spectrum_intervals(centre)
     new_state = state.with_column(name, cand)
-    tau_min, note = ieee952.fit_start(
-        tau,
-        state.avar,
-        edf,
-        new_state.columns,
-        flicker_max=ieee952.flicker_limit(ax.avar_hi(state.avar)),
-        dense_from=ax.dense_from,
-    )
+    tau_min, note = _fit_start_with(ax, state, new_state)
     widens = tau_min < ax.tau_min * (1 - 1e-9)
     if not widens:  # another line below the fit start still bends the short τ: judged in range
         tau_min = ax.tau_min
-    wide = _with_start(ax, tau_min)
-    fit_old = state.fit(wide)
-    good_old = goodness(fit_old, tau, state.avar, edf)
-    k = N_SHAPE["narrowband"] + 1
-    dbic, flags_ok = _judge("narrowband", new_state.fit(wide), fit_old, good_old, k, tau,
-                            state.avar, edf)  # fmt: skip
+    wide, dbic, flags_ok = _judged_from(ax, state, new_state, tau_min, N_SHAPE["narrowband"] + 1)
     cand.evidence |= {"avar_delta_bic": dbic, "fit_start_s": [ax.tau_min, tau_min]}
     if dbic >= DELTA_BIC:
         cand.intervals |= _column_profile(
@@ -1680,6 +1668,32 @@ def _short_line_judged(
     key = f"{name} below the fit start"  # its own record next to the in-range line's
     return Trial(key, cand, float(dbic - DELTA_BIC), flags_ok, new_state, holdout,
                  fit_start=(tau_min, note) if widens else None)  # fmt: skip
+
+
+def _fit_start_with(ax: _Axis, state: _State, new_state: _State) -> tuple[float, str]:
+    """(τ s, note): where :func:`ieee952.fit_start` starts the fit of ``state``'s Allan
+    variance with ``new_state``'s columns (a line below the fit start added)."""
+    return ieee952.fit_start(
+        ax.tau,
+        state.avar,
+        ax.edf,
+        new_state.columns,
+        flicker_max=ieee952.flicker_limit(ax.avar_hi(state.avar)),
+        dense_from=ax.dense_from,
+    )
+
+
+def _judged_from(
+    ax: _Axis, state: _State, new_state: _State, tau_min: float, k: int
+) -> tuple[_Axis, float, bool]:
+    """(the axis on the range from ``tau_min`` s, ΔBIC, flags clear) of ``new_state`` against
+    ``state`` on that range, ``k`` parameters added (:func:`_judge`)."""
+    wide = _with_start(ax, tau_min)
+    fit_old = state.fit(wide)
+    good_old = goodness(fit_old, ax.tau, state.avar, ax.edf)
+    dbic, flags_ok = _judge("narrowband", new_state.fit(wide), fit_old, good_old, k, ax.tau,
+                            state.avar, ax.edf)  # fmt: skip
+    return wide, dbic, flags_ok
 
 
 def _short_lines_joint(
@@ -1693,7 +1707,7 @@ def _short_lines_joint(
     judged as one term of 2 × 3 parameters on the range the fit start chooses with both; the
     hold-out checks each with the other modelled.  ``None`` when no second slot is left or the
     pair does not widen the range either."""
-    tau, edf = ax.tau, ax.edf
+    edf = ax.edf
 
     def refined(f: float, beside: _State) -> tuple[effects.Candidate, list]:
         spec, fits, fit_line, centre = _narrowband_refine(full, beside, (f,), cutoff)
@@ -1710,22 +1724,11 @@ def _short_lines_joint(
     first, fits_first = refined(lines[0], state.with_column(second_name, second))  # its rms
     cands, fits_of = [first, second], [fits_first, fits_second]  # beside the second's
     modelled = state.with_column(name, first).with_column(second_name, second)
-    tau_min, note = ieee952.fit_start(
-        tau,
-        state.avar,
-        edf,
-        modelled.columns,
-        flicker_max=ieee952.flicker_limit(ax.avar_hi(state.avar)),
-        dense_from=ax.dense_from,
-    )
+    tau_min, note = _fit_start_with(ax, state, modelled)
     if not tau_min < ax.tau_min * (1 - 1e-9):
         return None
-    wide = _with_start(ax, tau_min)
-    fit_old = state.fit(wide)
-    good_old = goodness(fit_old, tau, state.avar, edf)
     k = 2 * (N_SHAPE["narrowband"] + 1)
-    dbic, flags_ok = _judge("narrowband", modelled.fit(wide), fit_old, good_old, k, tau,
-                            state.avar, edf)  # fmt: skip
+    wide, dbic, flags_ok = _judged_from(ax, state, modelled, tau_min, k)
     for cand, fits, other in zip(cands, fits_of, cands[::-1], strict=True):
         cand.evidence |= {
             "avar_delta_bic": dbic,

@@ -129,6 +129,17 @@ def imu_stream(
     return Stream(topic, "sensor_msgs/msg/Imu", payloads, log_time)
 
 
+TWO_IMU_TOPICS = ("/imu0/data", "/imu1/data")
+"""The two Imu topics of :func:`two_imu_streams`."""
+
+
+def two_imu_streams(seconds: float) -> list[Stream]:
+    """Two Imu topics (:data:`TWO_IMU_TOPICS`, at 200 and 300 Hz, awkward values included)
+    among ``/tf``, ``/odom``, a temperature topic and a camera (:func:`other_streams`)."""
+    imus = [imu_stream(t, seconds, 200 + 100 * k, seed=k) for k, t in enumerate(TWO_IMU_TOPICS)]
+    return [*imus, *other_streams(seconds, camera=True, seed=7)]
+
+
 def adis_stream(topic: str, seconds: float, rate_hz: float, seed: int) -> Stream:
     """Our ADIS16364 frames (random burst words) with :data:`FRAME_IDS` cycled."""
     rng = np.random.default_rng(seed)

@@ -31,18 +31,20 @@ from imupipe.io.decode import IMU_SCHEMA, decode
 from imupipe.io.mcap_scan import McapScanner
 from imupipe.testing.busy_bag import (
     AWKWARD,
+    TWO_IMU_TOPICS,
     TYPESTORE,
     adis_stream,
     imu_stream,
     other_streams,
     rosbags_imu_values,
+    two_imu_streams,
     write_bag,
     write_rosbag2,
 )
 from imupipe.units import RAD_PER_DEG
 from imupipe.vocab import AXES
 
-TOPICS = ("/imu0/data", "/imu1/data")
+TOPICS = TWO_IMU_TOPICS
 SECONDS = 1.5
 
 
@@ -68,8 +70,7 @@ def assert_bits_equal(ours: np.ndarray, reference: np.ndarray) -> None:
 
 @pytest.fixture(scope="module")
 def streams():
-    imus = [imu_stream(t, SECONDS, 200 + 100 * k, seed=k) for k, t in enumerate(TOPICS)]
-    return [*imus, *other_streams(SECONDS, camera=True, seed=7)]
+    return two_imu_streams(SECONDS)
 
 
 @pytest.mark.parametrize("chunked", [True, False], ids=["chunked", "unchunked"])

@@ -23,16 +23,18 @@ from imupipe.io.columns import message_count
 from imupipe.io.decode import decode
 from imupipe.io.info import describe
 from imupipe.testing.busy_bag import (
+    TWO_IMU_TOPICS,
     TYPESTORE,
+    Stream,
     imu_stream,
-    other_streams,
     rosbags_imu_values,
+    two_imu_streams,
     write_rosbag2,
     write_rosbag2_db3,
 )
 from imupipe.vocab import AXES
 
-TOPICS = ("/imu0/data", "/imu1/data")
+TOPICS = TWO_IMU_TOPICS
 SECONDS = 1.5
 
 
@@ -45,8 +47,7 @@ def rosbags_imu(bag: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.fixture(scope="module")
 def streams():
-    imus = [imu_stream(t, SECONDS, 200 + 100 * k, seed=k) for k, t in enumerate(TOPICS)]
-    return [*imus, *other_streams(SECONDS, camera=True, seed=7)]
+    return two_imu_streams(SECONDS)
 
 
 @pytest.fixture(scope="module")
@@ -182,6 +183,19 @@ def test_a_database_damaged_part_way_keeps_what_precedes_the_damage(
         decode(cut)
 
 
+def _compressed_bag(bag: Path, storage: str, mode: str) -> tuple[Stream, Path]:
+    """An Imu topic written by rosbags' rosbag2 writer in ``storage`` (SQLITE3, MCAP) with
+    rosbag2's zstd compression in ``mode`` (FILE, MESSAGE); returns the stream and the bag."""
+    imu = imu_stream(TOPICS[0], SECONDS, 200, seed=5)
+    writer = Rosbag2Writer(bag, version=8, storage_plugin=getattr(StoragePlugin, storage))
+    writer.set_compression(getattr(CompressionMode, mode), CompressionFormat.ZSTD)
+    with writer:
+        connection = writer.add_connection(imu.topic, imu.msgtype, typestore=TYPESTORE)
+        for t, payload in zip(imu.log_time.tolist(), imu.payloads, strict=True):
+            writer.write(connection, t, payload)
+    return imu, bag
+
+
 @pytest.mark.parametrize("storage", ["SQLITE3", "MCAP"])
 @pytest.mark.parametrize("mode", ["FILE", "MESSAGE"])
 def test_bags_compressed_by_rosbag2_read_as_rosbags_reads_them(
@@ -190,14 +204,7 @@ def test_bags_compressed_by_rosbag2_read_as_rosbags_reads_them(
     """rosbag2's own compression (zstd), as rosbags writes it: each split file compressed whole
     (``bag.db3.zstd``, ``bag.mcap.zstd``: inflated into a temporary file while read) or each
     message's payload (SQLite: inflated message by message; MCAP: refused in one line)."""
-    imu = imu_stream(TOPICS[0], SECONDS, 200, seed=5)
-    bag = tmp_path / "bag"
-    writer = Rosbag2Writer(bag, version=8, storage_plugin=getattr(StoragePlugin, storage))
-    writer.set_compression(getattr(CompressionMode, mode), CompressionFormat.ZSTD)
-    with writer:
-        connection = writer.add_connection(imu.topic, imu.msgtype, typestore=TYPESTORE)
-        for t, payload in zip(imu.log_time.tolist(), imu.payloads, strict=True):
-            writer.write(connection, t, payload)
+    _, bag = _compressed_bag(tmp_path / "bag", storage, mode)
     if storage == "MCAP" and mode == "MESSAGE":
         with pytest.raises(InputError, match=r"bag\.mcap: MCAP compressed message by message"):
             decode(bag)
@@ -228,14 +235,7 @@ def test_a_file_that_would_inflate_past_the_free_disk_is_refused(
     tmp_path: Path, monkeypatch
 ) -> None:
     """A decompression bomb stops at a share of the temporary directory's free space."""
-    imu = imu_stream(TOPICS[0], SECONDS, 200, seed=5)
-    bag = tmp_path / "bag"
-    writer = Rosbag2Writer(bag, version=8, storage_plugin=StoragePlugin.SQLITE3)
-    writer.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
-    with writer:
-        connection = writer.add_connection(imu.topic, imu.msgtype, typestore=TYPESTORE)
-        for t, payload in zip(imu.log_time.tolist(), imu.payloads, strict=True):
-            writer.write(connection, t, payload)
+    _, bag = _compressed_bag(tmp_path / "bag", "SQLITE3", "FILE")
     monkeypatch.setattr(rosbag2, "FREE_DISK_SHARE", 1e-15)
     with pytest.raises(
         InputError, match=r"bag\.db3\.zstd: inflates beyond 0% of the free space of "
@@ -246,14 +246,7 @@ def test_a_file_that_would_inflate_past_the_free_disk_is_refused(
 
 def test_a_message_that_does_not_inflate_is_skipped_and_counted(tmp_path: Path) -> None:
     """Per-message compression: a payload that is no zstd frame is one skipped message."""
-    imu = imu_stream(TOPICS[0], SECONDS, 200, seed=5)
-    bag = tmp_path / "bag"
-    writer = Rosbag2Writer(bag, version=8, storage_plugin=StoragePlugin.SQLITE3)
-    writer.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
-    with writer:
-        connection = writer.add_connection(imu.topic, imu.msgtype, typestore=TYPESTORE)
-        for t, payload in zip(imu.log_time.tolist(), imu.payloads, strict=True):
-            writer.write(connection, t, payload)
+    imu, bag = _compressed_bag(tmp_path / "bag", "SQLITE3", "MESSAGE")
     with sqlite3.connect(next(bag.glob("*.db3"))) as db:
         db.execute("UPDATE messages SET data = x'00112233' WHERE id = 10")
     rec = decode(bag)
