@@ -59,10 +59,13 @@ def message_count(path: Path) -> int:
     Raises:
         sqlite3.DatabaseError: not a readable rosbag2 database.
     """
-    with contextlib.closing(
-        sqlite3.connect(f"{Path(path).absolute().as_uri()}?mode=ro", uri=True)
-    ) as db:
+    with contextlib.closing(_connect(path)) as db:
         return int(db.execute("SELECT count(*) FROM messages").fetchone()[0])
+
+
+def _connect(path: Path) -> sqlite3.Connection:
+    """The database at ``path``, opened read-only."""
+    return sqlite3.connect(f"{Path(path).absolute().as_uri()}?mode=ro", uri=True)
 
 
 @dataclass
@@ -134,7 +137,7 @@ class Db3Scanner:
         self._wanted = wanted
         self._progress = progress or (lambda n: None)
         self._max_bytes = max_chunk_bytes
-        self._db = sqlite3.connect(f"{self.path.absolute().as_uri()}?mode=ro", uri=True)
+        self._db = _connect(self.path)
         try:
             topics = self._db.execute(
                 "SELECT id, name, type, serialization_format FROM topics ORDER BY id"

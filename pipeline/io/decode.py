@@ -45,7 +45,7 @@ from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, d
 from imupipe.errors import ConfigError, InputError
 from imupipe.io.mcap_scan import MAX_CHUNK_BYTES
 from imupipe.io.mcap_walk import CDR_HEAD, CdrLayout
-from imupipe.io.rosbag2 import bag_compression, bag_files, opened
+from imupipe.io.rosbag2 import bag_files, message_compression, opened
 from imupipe.pages import small_pages
 from imupipe.units import RAD_PER_DEG, STANDARD_GRAVITY
 from imupipe.vocab import AXES
@@ -692,12 +692,12 @@ def scan(
         decoders[topic_kind[name]](_CdrMessages(rows, log_time), channels[name])
 
     frame_ids: dict[str, str] = {}  # the header.frame_id of each topic's first message
-    compression, _ = bag_compression(path)
+    compression = message_compression(path)
     for file in files:
         offset = done
         with opened(
             file,
-            "zstd" if compression == "message" else "",
+            compression,
             progress=progress and (lambda n, o=offset: progress(o + n)),
             max_chunk_bytes=max_chunk_bytes,
         ) as scanner:

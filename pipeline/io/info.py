@@ -16,7 +16,7 @@ from imupipe.device.frame_schema import SCHEMA_NAME
 from imupipe.io.db3_scan import Db3Report
 from imupipe.io.decode import IMU_SCHEMA
 from imupipe.io.mcap_scan import ScanReport
-from imupipe.io.rosbag2 import bag_compression, bag_files, opened
+from imupipe.io.rosbag2 import bag_files, message_compression, opened
 
 
 @dataclass
@@ -83,9 +83,9 @@ def describe(path: Path) -> RecordingInfo:
     metadata: dict[str, dict[str, str]] = {}
     file_bytes = chunks = 0
     sqlite = False
-    compression, _ = bag_compression(path)
+    compression = message_compression(path)
     for file in files:
-        with opened(file, "zstd" if compression == "message" else "") as scanner:
+        with opened(file, compression) as scanner:
             report = scanner.report
             for batch in scanner.batches():
                 info = _topic(topics, report, batch.channel_id)

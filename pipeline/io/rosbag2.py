@@ -56,10 +56,11 @@ def _listed_files(meta: Path) -> list[str]:
     return listed
 
 
-def bag_compression(path: Path) -> tuple[str, str]:
-    """rosbag2's compression of the recording at ``path``: (mode, format) from its
-    ``metadata.yaml`` (``compression_mode``: "file", "message" or ""; ``compression_format``:
-    "zstd" or ""), lower case; ("", "") for a file given alone or a directory without one.
+def message_compression(path: Path) -> str:
+    """rosbag2's per-message compression of the recording at ``path`` from its
+    ``metadata.yaml``: "zstd" where ``compression_mode`` is ``message``, else "" (a file given
+    alone, a directory without the file, no compression, or whole files compressed: those are
+    told by their ``.zstd`` suffix).
 
     Raises:
         InputError: a compression other than zstd (the only one rosbag2 ships).
@@ -73,10 +74,10 @@ def bag_compression(path: Path) -> tuple[str, str]:
                 found[key] = value.strip().strip("'\"").lower()
     mode, fmt = found["compression_mode"], found["compression_format"]
     if mode in ("", "none"):
-        return "", ""
+        return ""
     if fmt != "zstd":
         raise InputError(f"{meta}: compressed with {fmt!r}; imupipe reads zstd (rosbag2's own)")
-    return mode, fmt
+    return fmt if mode == "message" else ""
 
 
 def bag_files(path: Path) -> tuple[list[Path], list[str]]:

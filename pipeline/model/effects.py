@@ -791,8 +791,7 @@ def _block_level(y: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
     y_i − median of i's block).  The medians are :func:`imupipe.stats.robust.row_medians`
     over chunks of whole blocks (numba's np.median would cost ~1.5 s of compiling on a first
     run), the chunks on the usable cores (:func:`imupipe.jit.spread`: numpy's sort releases
-    the GIL); the deviations a
-    compiled pass over the blocks' parts (:func:`_deviation`)."""
+    the GIL); the deviations a compiled pass over the blocks' parts (:func:`_deviation`)."""
     n = y.size
     whole = n // block
     level = np.empty((n + block - 1) // block)

@@ -874,13 +874,15 @@ def _narrowband_refine(
     return best, fits, fit, evidence
 
 
-def _spectrum_intervals(centre: dict) -> dict[str, list[float]]:
-    """A narrowband line's 95 % intervals read in the spectrum (:func:`_narrowband_refine`'s
-    evidence): its centre's, and its width's where the Whittle fit gave the width."""
-    out = {"frequency_hz": [centre["frequency_lo"], centre["frequency_hi"]]}
+def _with_spectrum_centre(cand: effects.Candidate, centre: dict) -> effects.Candidate:
+    """``cand``, a narrowband line, with the spectrum's view of it (:func:`_narrowband_refine`'s
+    evidence) and the 95 % intervals read there: its centre's, and its width's where the
+    Whittle fit gave the width."""
+    cand.evidence["spectrum_centre"] = centre
+    cand.intervals["frequency_hz"] = [centre["frequency_lo"], centre["frequency_hi"]]
     if "width_interval_hz" in centre:
-        out["width_hz"] = list(centre["width_interval_hz"])
-    return out
+        cand.intervals["width_hz"] = list(centre["width_interval_hz"])
+    return cand
 
 
 def _spectrum_series(
@@ -1221,8 +1223,7 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
             centre = None
         cand = _column_candidate(kind, spec, fit_new, state, ax)
         if centre is not None:  # a narrowband line: its centre is the spectrum's
-            cand.evidence["spectrum_centre"] = centre
-            cand.intervals |= _spectrum_intervals(centre)
+            _with_spectrum_centre(cand, centre)
         tone = None
         if kind == "sinusoid":
             cand, fits, tone = _sinusoid_views(ax, state, (fit, good), whiten, cand, fits)
@@ -1647,23 +1648,17 @@ def _short_line_judged(
     """The :func:`_short_line_trial` of one refined line (:func:`_narrowband_refine` on the
     range ``full`` from the first τ): judged on the range the fit start chooses with it, or on
     the current range when it does not widen it."""
-    edf = ax.edf
     spec, fits, fit_line, centre = refined
-    cand = _column_candidate("narrowband", spec, fit_line, state, full)
-    cand.evidence["spectrum_centre"] = centre  # the centre is the spectrum's, as in the range
-    cand.intervals |= _spectrum_intervals(centre)
+    cand = _with_spectrum_centre(  # the centre is the spectrum's, as in the range
+        _column_candidate("narrowband", spec, fit_line, state, full), centre
+    )
     new_state = state.with_column(name, cand)
     tau_min, note = _fit_start_with(ax, state, new_state)
     widens = tau_min < ax.tau_min * (1 - 1e-9)
     if not widens:  # another line below the fit start still bends the short τ: judged in range
         tau_min = ax.tau_min
     wide, dbic, flags_ok = _judged_from(ax, state, new_state, tau_min, N_SHAPE["narrowband"] + 1)
-    cand.evidence |= {"avar_delta_bic": dbic, "fit_start_s": [ax.tau_min, tau_min]}
-    if dbic >= DELTA_BIC:
-        cand.intervals |= _column_profile(
-            "narrowband", fits, state.avar, edf, (ax.sig.tau0, ax.n_terms)
-        )
-        cand.evidence |= _spectrum_view(ax, state, cand)
+    _judged_evidence(ax, state, cand, fits, dbic, tau_min)
     holdout = partial(_holdout_column, wide, state, cand)
     key = f"{name} below the fit start"  # its own record next to the in-range line's
     return Trial(key, cand, float(dbic - DELTA_BIC), flags_ok, new_state, holdout,
@@ -1696,6 +1691,20 @@ def _judged_from(
     return wide, dbic, flags_ok
 
 
+def _judged_evidence(
+    ax: _Axis, state: _State, cand: effects.Candidate, fits: list, dbic: float, tau_min: float
+) -> None:
+    """A short-τ line's evidence after :func:`_judged_from`: its ΔBIC and the fit starts
+    before and with it, and where significant its value's profile interval over ``fits`` and
+    the spectrum's view (:func:`_spectrum_view`)."""
+    cand.evidence |= {"avar_delta_bic": dbic, "fit_start_s": [ax.tau_min, tau_min]}
+    if dbic >= DELTA_BIC:
+        cand.intervals |= _column_profile(
+            "narrowband", fits, state.avar, ax.edf, (ax.sig.tau0, ax.n_terms)
+        )
+        cand.evidence |= _spectrum_view(ax, state, cand)
+
+
 def _short_lines_joint(
     ax: _Axis, full: _Axis, state: _State, name: str, lines: list[float], cutoff: float
 ) -> Trial | None:
@@ -1707,14 +1716,11 @@ def _short_lines_joint(
     judged as one term of 2 × 3 parameters on the range the fit start chooses with both; the
     hold-out checks each with the other modelled.  ``None`` when no second slot is left or the
     pair does not widen the range either."""
-    edf = ax.edf
 
     def refined(f: float, beside: _State) -> tuple[effects.Candidate, list]:
         spec, fits, fit_line, centre = _narrowband_refine(full, beside, (f,), cutoff)
         cand = _column_candidate("narrowband", spec, fit_line, beside, full)
-        cand.evidence["spectrum_centre"] = centre
-        cand.intervals |= _spectrum_intervals(centre)
-        return cand, fits
+        return _with_spectrum_centre(cand, centre), fits
 
     first, _ = refined(lines[0], state)
     second_name = _column_name("narrowband", state.with_column(name, first))
@@ -1730,16 +1736,8 @@ def _short_lines_joint(
     k = 2 * (N_SHAPE["narrowband"] + 1)
     wide, dbic, flags_ok = _judged_from(ax, state, modelled, tau_min, k)
     for cand, fits, other in zip(cands, fits_of, cands[::-1], strict=True):
-        cand.evidence |= {
-            "avar_delta_bic": dbic,
-            "fit_start_s": [ax.tau_min, tau_min],
-            "found_with_hz": other.params["frequency_hz"],
-        }
-        if dbic >= DELTA_BIC:
-            cand.intervals |= _column_profile(
-                "narrowband", fits, state.avar, edf, (ax.sig.tau0, ax.n_terms)
-            )
-            cand.evidence |= _spectrum_view(ax, state, cand)
+        cand.evidence["found_with_hz"] = other.params["frequency_hz"]
+        _judged_evidence(ax, state, cand, fits, dbic, tau_min)
 
     def holdout() -> dict:  # each line with the other one modelled
         each = [
