@@ -188,6 +188,44 @@ def test_nan_and_inf_values_from_a_ros_driver(tmp_path: Path, capsys) -> None:
     assert all(np.isfinite(a["allan"]["adev"]).all() for a in report["axes"].values())
 
 
+@pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
+def test_an_axis_nan_in_every_frame_is_not_provided_not_a_bad_frame(
+    tmp_path: Path, capsys, budget: list[str]
+) -> None:
+    """A gyro-only unit publishing Imu with NaN accelerations: its gyros are analysed as if
+    the accelerometers were finite (in memory and through the spilled columns), and a NaN
+    gyro sample still makes its frame bad."""
+    stamps, gyro, accel = imu_stream()
+    gyro[4000, 1] = np.nan
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+    with_accel = write_imu_topics(tmp_path / "a" / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    gyro_only = write_imu_topics(
+        tmp_path / "b" / "f.mcap", {"/imu": (stamps, gyro, np.full_like(accel, np.nan))}
+    )
+    _, expected, _ = analyze(with_accel, capsys, *budget)
+    code, report, err = analyze(gyro_only, capsys, *budget)
+    assert code == 0, err
+    assert sorted(report["axes"]) == ["gyro_x", "gyro_y", "gyro_z"]
+    for axis in ("accel_x", "accel_y", "accel_z"):
+        assert f"{axis} is NaN/inf in every frame" in err
+    assert "1 frame(s) with NaN/inf values" in warnings_of(report)
+    assert report["input"]["frames"] == N - 1
+    for axis in report["axes"]:
+        assert report["axes"][axis]["allan"] == expected["axes"][axis]["allan"]
+        assert report["axes"][axis]["ieee952"] == expected["axes"][axis]["ieee952"]
+
+
+def test_every_axis_nan_in_every_frame_is_one_line(tmp_path: Path, capsys) -> None:
+    stamps, gyro, _ = imu_stream(3000)
+    nan = np.full_like(gyro, np.nan)
+    code, _, err = analyze(
+        write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps, nan, nan)}), capsys
+    )
+    assert code == 2
+    assert err.count("\n") == 1 and "no axis can be analysed: gyro_x is NaN/inf" in err
+
+
 def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> None:
     streams = {t: imu_stream(3000, seed=k) for k, t in enumerate(["/imu0/data", "/imu1/data"])}
     path = write_imu_topics(tmp_path / "f.mcap", streams)

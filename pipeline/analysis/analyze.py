@@ -26,6 +26,7 @@ from numba.core.dispatcher import Dispatcher
 from threadpoolctl import threadpool_limits
 
 from imupipe.analysis.condition import (
+    ABSENT,
     ConditionedSeries,
     GapPolicy,
     condition,
@@ -256,6 +257,8 @@ def find_axis_events(
     stuck, and each analysable axis' outlier search (the detector's input leaves them out)."""
 
     def first_pass(name: str) -> tuple[np.ndarray, OutlierSearch] | str:
+        if name in series.absent_axes:
+            return ABSENT
         y = series.on_grid(axis(name))  # excluded samples (NaN/inf frames, gaps) filled
         if why := unanalysable(y):
             return why
@@ -318,6 +321,8 @@ def analyze_axes(
             excluded = cut if excluded is None else excluded | cut
 
         def analyse(name: str) -> AxisResult | str:
+            if name in series.absent_axes:
+                return ABSENT
             y = series.on_grid(axis(name))
             why = stuck.get(name) or (None if found is not None else unanalysable(y))
             if why is not None:

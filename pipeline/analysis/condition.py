@@ -36,7 +36,7 @@ from typing import Literal
 import numpy as np
 
 from imupipe.errors import ImupipeError
-from imupipe.io.decode import ImuRecording
+from imupipe.io.decode import ImuRecording, nonfinite_bits
 from imupipe.stats import robust
 from imupipe.stats.allan import clean_runs
 from imupipe.vocab import AXES
@@ -104,6 +104,9 @@ class ConditionedSeries:
     rate the analysis keeps, :func:`rate_regimes`)."""
     excluded: np.ndarray | None = None
     """Policy ``"mask"``: bool (grid samples,) True where no usable sample exists."""
+    absent_axes: tuple[str, ...] = ()
+    """Axes NaN/inf in every frame, which the sensor does not provide: not analysed
+    (:data:`ABSENT`), and their NaN/inf does not make a frame bad."""
 
     @property
     def rate_hz(self) -> float:
@@ -223,6 +226,10 @@ def unanalysable(y: np.ndarray) -> str | None:
     if _count(later, lambda i: later[i : i + _SCAN] != earlier[i : i + _SCAN]) == 0:
         return "repeats every 2 samples (a deterministic alternation, no noise)"
     return None
+
+
+ABSENT = "is NaN/inf in every frame (an axis the sensor does not provide?)"
+"""Why an axis of :attr:`ConditionedSeries.absent_axes` is not analysed."""
 
 
 def stuck_warning(axis: str, reason: str) -> str:
@@ -435,11 +442,15 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
     period = 1.0 / rate
 
     if "nonfinite" in df.columns:  # a frame decoded without its axes (imupipe.io.columns)
-        nonfinite = df["nonfinite"].to_numpy()
+        bits = df["nonfinite"].to_numpy()
     else:
-        nonfinite = np.zeros(n, dtype=bool)
-        for a in AXES:
-            nonfinite |= ~np.isfinite(df[a].to_numpy())
+        bits = nonfinite_bits((df[a].to_numpy() for a in AXES), n)
+    # an axis NaN/inf in every frame is one the sensor does not provide (a gyro-only unit's
+    # accelerometers): not analysed, and no reason to drop the other axes' frames
+    absent_bits = np.bitwise_and.reduce(bits)
+    absent = tuple(a for i, a in enumerate(AXES) if absent_bits >> i & 1)
+    nonfinite = (bits & ~absent_bits) != 0
+    del bits
     saturated = df["saturated"].to_numpy()
     mad_sigma = robust.MAD_TO_SIGMA * robust.mad(t, differences=True)
     threshold = max(GAP_FACTOR * period, period + JITTER_SIGMAS * mad_sigma)
@@ -488,7 +499,7 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
         masked = _masked_series(t, counter, period, bad_row, segments, chosen, counts, offset)
         longest_gap_s = None if masked is None else _longest_run(masked.excluded) * masked.tau0_s
         if masked is not None and (gaps == "mask" or longest_gap_s <= AUTO_MAX_GAP_S):
-            return replace(masked, warnings=(*warnings, *masked.warnings))
+            return replace(masked, warnings=(*warnings, *masked.warnings), absent_axes=absent)
         warnings.append(
             f"more than {100 * MAX_MASKED_FRACTION:.0f} % of the sample grid would be masked: "
             "the longest clean segment is analysed instead"
@@ -533,6 +544,7 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
         chosen=chosen,
         counts=counts,
         warnings=tuple(warnings),
+        absent_axes=absent,
     )
 
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import mmap
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
@@ -82,7 +82,18 @@ DECODED_SCHEMA = pl.Schema(
     }
 )
 """The contract of :attr:`ImuRecording.frames` (whole decode; a ``columns`` subset has these
-columns' types, and ``nonfinite``, when asked for, is Boolean)."""
+columns' types, and ``nonfinite``, when asked for, is UInt8: :func:`nonfinite_bits`)."""
+
+
+def nonfinite_bits(axes: Iterable[np.ndarray], n: int) -> np.ndarray:
+    """Which axes of each of ``n`` frames are NaN/inf: uint8 (n,), bit i set where the i-th of
+    ``axes`` (the columns of :data:`AXES`, in order) is, so that an axis a sensor does not
+    provide (NaN in every frame) can be told from a bad frame
+    (:func:`imupipe.analysis.condition.condition`)."""
+    bits = np.zeros(n, np.uint8)
+    for i, values in enumerate(axes):
+        bits |= (~np.isfinite(values)).view(np.uint8) << np.uint8(i)
+    return bits
 
 
 @dataclass(frozen=True)
@@ -312,15 +323,15 @@ def _decode_imu(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) 
     """Decode the fields of Imu messages that ``columns`` needs (None: all of them).
 
     A subset keeps the stamps only for ``t_s`` / ``stamp_ns`` / ``temp_c`` (interpolated on the
-    stamps), each axis only when named, and ``nonfinite`` (any axis NaN/inf, 1 byte per frame)
-    instead of the axes for conditioning."""
+    stamps), each axis only when named, and ``nonfinite`` (which axes are NaN/inf,
+    :func:`nonfinite_bits`: 1 byte per frame) instead of the axes for conditioning."""
     every = columns is None
     if every or columns & {"t_s", "stamp_ns", "temp_c"}:
         out.add(stamp_ns=m.stamps())
     if every or "t_s" in columns:
         out.add(log_time_ns=m.log_time)
     if not every and "nonfinite" in columns:
-        out.add(nonfinite=~np.isfinite(m.f64(0, 6)).all(axis=1))
+        out.add(nonfinite=nonfinite_bits(m.f64(0, 6).T, len(m)))
     for i, name in enumerate(AXES):  # each axis a contiguous column, as the frame holds it
         if every or name in columns:
             out.add(**{name: m.f64(8 * i, 1)[:, 0]})
@@ -334,7 +345,7 @@ def _adis_frame(
     cols: dict[str, np.ndarray], device: adis.DeviceConfig, n: int, columns: frozenset[str] | None
 ) -> pl.DataFrame:
     """Counts → SI columns with the device's scale factors: the decode contract's columns, or
-    only ``columns`` of them (``nonfinite`` is all false: the words are integers), ``n`` rows.
+    only ``columns`` of them (``nonfinite`` is all 0: the words are integers), ``n`` rows.
     Each integer column leaves ``cols`` (the caller's dict) as it is scaled, and stamps not
     asked for as soon as :func:`decode` has made ``t_s``."""
     if columns is not None and "stamp_ns" not in columns:
@@ -348,7 +359,7 @@ def _adis_frame(
         "supply_v": lambda: cols.pop("supply_v") * adis.SUPPLY_V_PER_LSB,
         **{k: (lambda k=k: cols.pop(k)) for k in ("counter", "flag_nd", "flag_ea", "saturated")},
         "diag_stat": lambda: cols.pop("diag_stat"),
-        "nonfinite": lambda: pl.repeat(False, n, dtype=pl.Boolean, eager=True),
+        "nonfinite": lambda: pl.repeat(0, n, dtype=pl.UInt8, eager=True),
     }
     wanted = [k for k in makers if (k != "nonfinite" if columns is None else k in columns)]
     return pl.DataFrame({k: makers[k]() for k in wanted})
@@ -533,9 +544,9 @@ class ScannedRecording:
         return frozenset(raw)
 
     def recording(self, columns: frozenset[str] | None = None) -> ImuRecording | None:
-        """The frame of the decode contract, or of ``columns`` only (``nonfinite``: bool, any
-        axis NaN/inf, if named); None if ``t_s`` needs the log time that the scan only counted
-        (``keep_one_time_base``): the file must then be read again, keeping it."""
+        """The frame of the decode contract, or of ``columns`` only (``nonfinite``:
+        :func:`nonfinite_bits`, if named); None if ``t_s`` needs the log time that the scan
+        only counted (``keep_one_time_base``): the file must then be read again, keeping it."""
         warnings = list(self.warnings)
         use_log = (columns is None or "t_s" in columns) and _uses_log_time(
             self.channel.steps, warnings
@@ -583,11 +594,12 @@ def decode(
 ) -> ImuRecording:
     """Decode the IMU channel of an MCAP file or rosbag2 directory (contract: module docstring).
 
-    ``columns`` restricts the frame to those contract columns, plus ``nonfinite`` (bool: any
-    axis NaN/inf) if named, so that only what a step needs is held; None gives the whole
-    contract.  ``keep_one_time_base``: for ``t_s``, keep only the header stamps while reading
-    (both bases' monotonicity is counted on the way) and read the file again for the log time
-    in the rare case the stamps are unset or broken — one int64 column less at the peak.
+    ``columns`` restricts the frame to those contract columns, plus ``nonfinite`` (which axes
+    are NaN/inf: :func:`nonfinite_bits`) if named, so that only what a step needs is held; None
+    gives the whole contract.  ``keep_one_time_base``: for ``t_s``, keep only the header stamps
+    while reading (both bases' monotonicity is counted on the way) and read the file again for
+    the log time in the rare case the stamps are unset or broken — one int64 column less at the
+    peak.
     ``max_chunk_bytes``: chunks declaring more uncompressed bytes are skipped unread
     (:func:`imupipe.io.mcap_scan.chunk_limit` of the memory budget).
     ``temperature_topic``: the Temperature topic to use for an Imu topic (default: the one in

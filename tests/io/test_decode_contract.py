@@ -30,6 +30,7 @@ from imupipe.device.frame_schema import (
 from imupipe.errors import InputError
 from imupipe.io.decode import decode, scan
 from imupipe.io.mcap_bulk import BulkWriter
+from imupipe.vocab import AXES
 
 T0 = 1_700_000_000_000_000_000
 G = 9.80665  # m/s² per g
@@ -124,7 +125,7 @@ def test_column_subsets_hold_the_same_values(tmp_path: Path) -> None:
         assert sorted(part.columns) == sorted(cols)
         assert part.equals(whole.select(part.columns))
     flags = decode(path, columns=frozenset({"nonfinite", "flag_nd", "saturated"})).frames
-    assert flags["nonfinite"].to_list() == [False] * n  # integer words are always finite
+    assert flags["nonfinite"].to_list() == [0] * n  # integer words are always finite
     assert flags["flag_nd"].all() and not flags["saturated"].any()
 
 
@@ -342,6 +343,7 @@ def test_imu_nonfinite_marks_the_bad_message(tmp_path: Path) -> None:
     f = decode(tmp_path / "bag", columns=frozenset({"nonfinite", "accel_z"})).frames
     assert f.columns == ["accel_z", "nonfinite"]
     assert f["nonfinite"].to_numpy().nonzero()[0].tolist() == [42]  # a NaN covariance is not
+    assert f["nonfinite"][42] == 1 << AXES.index("accel_y")  # which axis: the bit of accel_y
 
 
 def test_scan_in_memory_or_spilled(tmp_path: Path) -> None:
