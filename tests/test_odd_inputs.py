@@ -226,6 +226,31 @@ def test_every_axis_nan_in_every_frame_is_one_line(tmp_path: Path, capsys) -> No
     assert err.count("\n") == 1 and "no axis can be analysed: gyro_x is NaN/inf" in err
 
 
+@pytest.mark.parametrize(
+    ("scale", "offset", "says"),
+    [
+        (1 / 9.80665, 0.0, "the accelerations look like g, not the m/s²"),
+        (1.0, 6.0, "or a sensor that was not at rest"),
+        (1.0, 0.0, None),
+    ],
+)
+def test_accelerations_in_g_or_not_at_rest_are_warned(
+    tmp_path: Path, capsys, scale: float, offset: float, says: str | None
+) -> None:
+    """A driver publishing Imu accelerations in g (REP 103 says m/s²) would give terms 9.81×
+    too small under m/s² labels: the mean specific force, gravity at rest, says so."""
+    stamps, gyro, accel = imu_stream(3000)
+    accel = accel * scale + np.array([offset, 0.0, 0.0])
+    code, report, err = analyze(
+        write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps, gyro, accel)}), capsys
+    )
+    assert code == 0
+    if says is None:
+        assert "specific force" not in err and "specific force" not in warnings_of(report)
+    else:
+        assert says in err and says in warnings_of(report)
+
+
 def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> None:
     streams = {t: imu_stream(3000, seed=k) for k, t in enumerate(["/imu0/data", "/imu1/data"])}
     path = write_imu_topics(tmp_path / "f.mcap", streams)

@@ -25,6 +25,7 @@ import polars as pl
 from numba.core.dispatcher import Dispatcher
 from threadpoolctl import threadpool_limits
 
+from imupipe.analysis.at_rest import specific_force_warning
 from imupipe.analysis.condition import (
     ABSENT,
     ConditionedSeries,
@@ -404,6 +405,7 @@ def analyze(
             *series.warnings,
             *(stuck_warning(a, why) for a, why in stuck.items()),
             *outlier_warnings(results),
+            *filter(None, [specific_force_warning(results)]),
             *(found.warnings() if found is not None else []),
             *source.notes(series.segment.frames, options.rrd, at_once),
         ]
