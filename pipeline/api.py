@@ -59,7 +59,9 @@ def analyze(
             ``taus_per_decade``, ``gaps``, ``loop``, ``rrd``, ``figures``,
             ``memory_budget_bytes``, ``tmp_dir``: where a recording over the memory budget is
             spilled, default the system's temporary directory; ``workers``: axes analysed at
-            once, default the usable cores, the same results).
+            once, default the usable cores, the same results; ``start_s``, ``end_s``: the time
+            window analysed, s from the first frame, a negative end counting back from the
+            last frame).
 
     Returns:
         The :class:`AnalysisResult`: SI values per axis; ``to_dict()`` is ``report.json``,

@@ -65,6 +65,22 @@ InflateOption = Annotated[
     float,
     typer.Option(help="Factor on every exported noise strength (variances: its square)."),
 ]
+StartOption = Annotated[
+    float,
+    typer.Option(
+        "--start",
+        help="Analyse from this time on, s from the recording's first frame (e.g. after "
+        "the robot was set down).",
+    ),
+]
+EndOption = Annotated[
+    float | None,
+    typer.Option(
+        "--end",
+        help="Analyse up to this time, s from the first frame; negative: that many seconds "
+        "before the last frame (default: the last frame).",
+    ),
+]
 RateOption = Annotated[
     float | None,
     typer.Option(
@@ -291,6 +307,8 @@ def analyze(
             "topic's namespace or with its frame_id; none otherwise)."
         ),
     ] = None,
+    start: StartOption = 0.0,
+    end: EndOption = None,
     quiet: Quiet = False,
 ) -> None:
     """Analyse a recording: Allan deviation, IEEE 952 terms, effects; write reports."""
@@ -324,6 +342,8 @@ def analyze(
         datasheet=datasheet,
         temperature_topic=temperature_topic,
         workers=jobs,
+        start_s=start,
+        end_s=end,
     )
     if topic != ALL_TOPICS:
         _analyze_one(path, out_dir, options, quiet, exporting)
@@ -449,6 +469,8 @@ def fleet(
             help="As imupipe analyze; capped at 60 % of each worker's memory limit.",
         ),
     ] = 2.0,
+    start: StartOption = 0.0,
+    end: EndOption = None,
     quiet: Quiet = False,
 ) -> None:
     """Analyse many recordings on a Dask cluster; write each unit's reports and the fleet's
@@ -463,6 +485,8 @@ def fleet(
         loop=loop,
         rrd=rrd,
         memory_budget_bytes=round(memory_budget_gb * 1e9),
+        start_s=start,
+        end_s=end,
     )
     result = run_fleet(
         recordings,

@@ -478,6 +478,9 @@ def test_one_topic_with_two_message_types_is_one_line(tmp_path: Path, cli) -> No
     ("args", "expected"),
     [
         (["--memory-budget-gb", "inf"], "--memory-budget-gb must be a finite number"),
+        (["--start", "nan"], "the time window needs a finite --start >= 0 and --end (s)"),
+        (["--end", "-inf"], "the time window needs a finite --start >= 0 and --end (s)"),
+        (["--start", "1e9"], "the window --start 1e+09 --end (last frame) s holds 0 frame(s)"),
     ],
 )
 def test_analyze_options_that_are_not_finite_are_one_line(tmp_path, args, expected, cli):

@@ -38,6 +38,7 @@ from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.recording.recorder import FrameWriter
 from imupipe.recording.simulator import VirtualADIS16364
 from imupipe.testing.ros_cdr import imu_payloads
+from imupipe.vocab import AXES
 
 RATE_HZ = 100.0
 N = 12_000  # 2 min
@@ -249,6 +250,46 @@ def test_accelerations_in_g_or_not_at_rest_are_warned(
         assert "specific force" not in err and "specific force" not in warnings_of(report)
     else:
         assert says in err and says in warnings_of(report)
+
+
+@pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
+def test_a_time_window_analyses_what_the_same_frames_alone_give(
+    tmp_path: Path, capsys, budget: list[str]
+) -> None:
+    """--start 20 --end -40 on 0..119.99 s: frames 2000..7999 (t = 20..79.99 s) analysed, as if
+    they had been recorded alone (in memory and through the spilled columns); the report says so."""
+    stamps, gyro, accel = imu_stream()
+    for folder in ("whole", "alone"):
+        (tmp_path / folder).mkdir()
+    whole = write_imu_topics(tmp_path / "whole" / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    part = slice(2000, 8000)
+    alone = write_imu_topics(
+        tmp_path / "alone" / "f.mcap", {"/imu": (stamps[part], gyro[part], accel[part])}
+    )
+    code, windowed, err = analyze(whole, capsys, "--start", "20", "--end", "-40", *budget)
+    assert code == 0, err
+    _, expected, _ = analyze(alone, capsys, *budget)
+    assert windowed["input"]["window_s"] == [20.0, -40.0]
+    assert expected["input"]["window_s"] == [0.0, None]
+    assert windowed["input"]["frames"] == expected["input"]["frames"] == 6000
+    (segment,) = windowed["input"]["segments"]
+    assert (segment["start_frame"], segment["t_start_s"], segment["t_stop_s"]) == (
+        2000,
+        20.0,
+        79.99,
+    )
+    assert sorted(windowed["axes"]) == sorted(expected["axes"]) == sorted(AXES)
+    for axis, result in windowed["axes"].items():  # τ0 from stamps 20..79.99 s or 0..59.99 s
+        other = expected["axes"][axis]
+        np.testing.assert_allclose(result["allan"]["adev"], other["allan"]["adev"], rtol=1e-12)
+        assert result["allan"]["tau_s"] == pytest.approx(other["allan"]["tau_s"], rel=1e-12)
+        for term, value in result["ieee952"].items():
+            if isinstance(value, dict) and "value" in value:
+                theirs = other["ieee952"][term]
+                assert value["reason"] == theirs["reason"]
+                assert (value["value"] is None) == (theirs["value"] is None)
+                if value["value"] is not None:
+                    assert value["value"] == pytest.approx(theirs["value"], rel=1e-9)
 
 
 def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> None:

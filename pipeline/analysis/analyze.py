@@ -96,6 +96,11 @@ class AnalyzeOptions:
     workers: int | None = None
     """Axes analysed at once, each on its own thread (default: the cores this process may use;
     fewer when the memory budget has no room for more, :func:`axis_concurrency`)."""
+    start_s: float = 0.0
+    """Analyse from this time on, s from the recording's first frame (its stamps' time base)."""
+    end_s: float | None = None
+    """Analyse up to this time, s from the first frame (None: the last frame; negative: that
+    many seconds before the last frame)."""
 
 
 def analyze_options(**options: object) -> AnalyzeOptions:
@@ -246,6 +251,7 @@ def input_summary(
         time_source=rec.time_source,
         counts=series.counts,
         temperature_topic=rec.temperature_topic,
+        window_s=series.window_s,
     )
 
 
@@ -382,7 +388,7 @@ def analyze(
             with progress.stage("compile", 1, "step"):
                 load_kernels(options.loop)
         rec = source.conditioning()
-        series = condition(rec, gaps=options.gaps)
+        series = condition(rec, options.gaps, options.start_s, options.end_s)
         check_frames(rec, series.usable_samples)
         t0_stamp_s = float(rec.frames["t_s"][series.rows.start])  # the first analysed sample
         frames = rec.frames.height

@@ -107,6 +107,8 @@ class ConditionedSeries:
     absent_axes: tuple[str, ...] = ()
     """Axes NaN/inf in every frame, which the sensor does not provide: not analysed
     (:data:`ABSENT`), and their NaN/inf does not make a frame bad."""
+    window_s: tuple[float, float | None] = (0.0, None)
+    """The time window the segments were cut from (:func:`window_rows`)."""
 
     @property
     def rate_hz(self) -> float:
@@ -418,24 +420,54 @@ def _longest_run(flags: np.ndarray) -> int:
     return int(np.max(np.diff(clean_runs(~flags), axis=1), initial=0))
 
 
-def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
+def window_rows(t: np.ndarray, start_s: float = 0.0, end_s: float | None = None) -> slice:
+    """The rows of the time window [``start_s``, ``end_s``] of stamps ``t`` (s from the first
+    frame): from the first row stamped at or after ``start_s`` to the last stamped at or before
+    ``end_s`` (None: the last frame's stamp; negative: that many seconds before it).  A slice of
+    rows, so that a stamp going backwards inside the window stays for conditioning to find."""
+    stop_s = t[-1] if end_s is None else (t[-1] + end_s if end_s < 0 else end_s)
+    first = int(np.argmax(t >= start_s)) if t.size and t.max() >= start_s else t.size
+    after = np.flatnonzero(t[first:] <= stop_s)
+    return slice(first, first + int(after[-1]) + 1 if after.size else first)
+
+
+def condition(
+    rec: ImuRecording, gaps: GapPolicy = "auto", start_s: float = 0.0, end_s: float | None = None
+) -> ConditionedSeries:
     """Cut ``rec`` into uniformly sampled segments and pick the one to analyse (``gaps``:
-    ``"auto"``, ``"longest"``, ``"fail"`` or ``"mask"``, module docstring)."""
+    ``"auto"``, ``"longest"``, ``"fail"`` or ``"mask"``, module docstring), within the time
+    window [``start_s``, ``end_s``] (:func:`window_rows`; default: the whole recording)."""
+    if not (np.isfinite(start_s) and start_s >= 0) or not (end_s is None or np.isfinite(end_s)):
+        given = f"--start {start_s:g}" + ("" if end_s is None else f" --end {end_s:g}")
+        raise ImupipeError(f"the time window needs a finite --start >= 0 and --end (s): {given}")
     df = rec.frames
+    offset = 0
+    if start_s != 0.0 or end_s is not None:
+        t = df["t_s"].to_numpy()
+        rows = window_rows(t, start_s, end_s)
+        if rows.stop - rows.start < 2:
+            raise ImupipeError(
+                f"{rec.path}: the window --start {start_s:g} --end "
+                f"{'(last frame)' if end_s is None else f'{end_s:g}'} s holds "
+                f"{rows.stop - rows.start} frame(s) of a recording stamped 0..{t.max():.6g} s"
+            )
+        offset = rows.start
+        df = df.slice(offset, rows.stop - offset)
     n = df.height
     if n < 2:
         raise ImupipeError(f"{rec.path}: {n} frame(s), too few for any averaging time")
     warnings = list(rec.warnings)
     regimes = rate_regimes(df["t_s"].to_numpy())
-    offset = 0
     if len(regimes) > 1:  # analyse the longest part at one rate, as if the rest were a gap
-        offset, stop, step = max(regimes, key=lambda r: r[1] - r[0])
-        rates = ", ".join(f"{1 / r[2]:.4g} Hz from frame {r[0]}" for r in regimes)
+        first, stop, step = max(regimes, key=lambda r: r[1] - r[0])
+        rates = ", ".join(f"{1 / r[2]:.4g} Hz from frame {r[0] + offset}" for r in regimes)
         warnings.append(
             f"the sample rate changes {len(regimes) - 1} time(s) ({rates}): analysing the "
-            f"longest part at one rate, frames {offset}..{stop - 1} ({1 / step:.4g} Hz)"
+            f"longest part at one rate, frames {first + offset}..{stop - 1 + offset} "
+            f"({1 / step:.4g} Hz)"
         )
-        df = df.slice(offset, stop - offset)
+        df = df.slice(first, stop - first)
+        offset += first
         n = df.height
     t = df["t_s"].to_numpy()
     rate = _nominal_rate(rec, t)
@@ -499,7 +531,12 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
         masked = _masked_series(t, counter, period, bad_row, segments, chosen, counts, offset)
         longest_gap_s = None if masked is None else _longest_run(masked.excluded) * masked.tau0_s
         if masked is not None and (gaps == "mask" or longest_gap_s <= AUTO_MAX_GAP_S):
-            return replace(masked, warnings=(*warnings, *masked.warnings), absent_axes=absent)
+            return replace(
+                masked,
+                warnings=(*warnings, *masked.warnings),
+                absent_axes=absent,
+                window_s=(start_s, end_s),
+            )
         warnings.append(
             f"more than {100 * MAX_MASKED_FRACTION:.0f} % of the sample grid would be masked: "
             "the longest clean segment is analysed instead"
@@ -545,6 +582,7 @@ def condition(rec: ImuRecording, gaps: GapPolicy = "auto") -> ConditionedSeries:
         counts=counts,
         warnings=tuple(warnings),
         absent_axes=absent,
+        window_s=(start_s, end_s),
     )
 
 

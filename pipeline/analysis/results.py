@@ -57,8 +57,9 @@ class AxisResult:
 class InputSummary:
     """What was analysed: file, topic, frame count, rate (Hz), duration (s) of the analysed data,
     the clean segments found (dicts from the condition stage), the warnings raised, the message
-    type, the time base (``header.stamp`` or ``log_time``), what conditioning counted and the
-    Temperature topic used as the IMU's temperature (None: none, or the ADIS16364's own)."""
+    type, the time base (``header.stamp`` or ``log_time``), what conditioning counted, the
+    Temperature topic used as the IMU's temperature (None: none, or the ADIS16364's own) and
+    the time window analysed."""
 
     path: str
     topic: str
@@ -71,6 +72,9 @@ class InputSummary:
     time_source: str = "header.stamp"
     counts: dict[str, int] = field(default_factory=dict)
     temperature_topic: str | None = None
+    window_s: tuple[float, float | None] = (0.0, None)
+    """The time window asked for (``--start``, ``--end``: s from the first frame; end None: the
+    last frame, negative: before it)."""
 
 
 @dataclass(frozen=True)

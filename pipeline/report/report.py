@@ -181,6 +181,18 @@ def _md_table(header: tuple[str, ...], rows: Iterable[tuple[str, ...]]) -> str:
     return "\n".join([line(header), "|" + "---|" * len(header), *map(line, rows)])
 
 
+def window_text(window_s: tuple[float, float | None]) -> str | None:
+    """The time window analysed, in words (None: the whole recording)."""
+    start, end = window_s
+    if start == 0 and end is None:
+        return None
+    if end is None:
+        to = "the last frame"
+    else:
+        to = f"{-end:g} s before the last frame" if end < 0 else f"t = {end:g} s"
+    return f"window from t = {start:g} s to {to} (--start, --end)"
+
+
 def format_table(result: AnalysisResult, datasheet: Datasheet | None = None) -> str:
     """The paper-style terminal table printed by ``imupipe analyze``: the final model's terms
     (``datasheet``: default :func:`default_datasheet`)."""
@@ -190,6 +202,8 @@ def format_table(result: AnalysisResult, datasheet: Datasheet | None = None) -> 
         f"{inp.rate_hz:.4g} Hz, {inp.duration_s / 3600:.3g} h analysed; final model (after the "
         "closed loop)"
     )
+    if window := window_text(inp.window_s):
+        head += f"; {window}"
     parts = [head, _text_table(*paper_rows(result, datasheet or default_datasheet(result)))]
     loop_rows = _loop_rows(result)
     if loop_rows:
@@ -232,6 +246,8 @@ def report_markdown(
         ),
         "",
     ]
+    if window := window_text(inp.window_s):
+        md += [f"Analysed: {window}.", ""]
     if result.device:
         md += ["Device: " + ", ".join(f"{_md(k)} = {_md(v)}" for k, v in result.device.items()), ""]
     if inp.segments:

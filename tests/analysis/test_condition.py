@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import polars as pl
 import pytest
 
-from imupipe.analysis.condition import condition, fill_runs, unanalysable
+from imupipe.analysis.condition import condition, fill_runs, unanalysable, window_rows
 from imupipe.errors import ImupipeError
 from imupipe.io.decode import ImuRecording
 from imupipe.vocab import AXES
@@ -510,3 +512,49 @@ def test_the_masked_grid_of_the_part_at_one_rate_reads_that_parts_rows() -> None
     on_grid = s.on_grid(y[s.rows])
     assert np.abs(on_grid).max() < 10  # no row of the 200 Hz part
     np.testing.assert_array_equal(on_grid[:5], y[start : start + 5])
+
+
+def test_window_rows_from_start_to_end_or_before_the_last_frame() -> None:
+    t = np.arange(1000) * 0.01  # 0 .. 9.99 s
+    assert window_rows(t, 2.0, 5.0) == slice(200, 501)  # both ends stamped in
+    assert window_rows(t, 2.005, 5.005) == slice(201, 501)
+    assert window_rows(t, 0.0, -1.0) == slice(0, 900)  # up to 8.99 s: 1 s before 9.99 s
+    assert window_rows(t, 9.5) == slice(950, 1000)  # to the last frame
+    assert window_rows(t, 10.5) == slice(1000, 1000)  # past the end: empty
+    back = t.copy()
+    back[300] = 1.0  # a stamp going backwards inside the window stays in it (a break to find)
+    assert window_rows(back, 2.0, 5.0) == slice(200, 501)
+
+
+def test_a_window_is_conditioned_like_the_same_frames_alone() -> None:
+    """--start 2 --end 6 on 10 s with a lost frame at 4 s: the same segments as conditioning
+    rows 200..600 alone, at the recording's row numbers and times; the rate regime's and the
+    mask's offsets add to the window's."""
+
+    def lost(a):
+        a[400:] += 10_000_000 if a.dtype == np.int64 and a.max() > 1e6 else 1
+
+    rec = recording(stamp_ns=lost, counter=lost)
+    windowed = condition(rec, "longest", 2.0, 6.0)
+    alone = condition(replace(rec, frames=rec.frames.slice(200, 400)), "longest")
+    assert windowed.window_s == (2.0, 6.0) and alone.window_s == (0.0, None)
+    shift = [(s.start - 200, s.stop - 200, s.t_start_s, s.t_stop_s) for s in windowed.segments]
+    assert shift == [(s.start, s.stop, s.t_start_s, s.t_stop_s) for s in alone.segments]
+    assert [(s.start, s.stop) for s in windowed.segments] == [(200, 400), (400, 600)]
+    masked = condition(rec, "mask", 2.0, 6.0)
+    assert masked.rows == slice(200, 600) and masked.excluded.sum() == 1
+
+
+@pytest.mark.parametrize(
+    ("start", "end", "says"),
+    [
+        (20.0, None, "the window --start 20 --end (last frame) s holds 0 frame(s)"),
+        (5.0, 5.001, "holds 1 frame(s) of a recording stamped 0..9.99 s"),
+        (float("nan"), None, "needs a finite --start >= 0 and --end (s): --start nan"),
+        (-1.0, None, "needs a finite --start >= 0"),
+        (0.0, float("inf"), "--start 0 --end inf"),
+    ],
+)
+def test_a_window_without_two_frames_or_not_finite_is_an_error(start, end, says) -> None:
+    with pytest.raises(ImupipeError, match=re.escape(says)):
+        condition(recording(), "auto", start, end)
