@@ -414,3 +414,87 @@ def test_the_levels_either_side_of_an_event_are_medians_over_60_s() -> None:
     assert event.kind == "transient"
     for a in means:
         assert 8.5 < event.level_change[a] < 10.0
+
+
+def swing(means: dict[str, np.ndarray], first: int, blocks: int, axes: tuple[str, ...]) -> dict:
+    """A 0.7 Hz oscillation of 40 block sigmas over ``blocks`` fine blocks from ``first`` (a
+    vibration burst, a robot carried about): zero mean, so no box of it stands out whole."""
+    out = {a: v.copy() for a, v in means.items()}
+    t = np.arange(blocks) * DT
+    for k, a in enumerate(axes):
+        out[a][first : first + blocks] += 40 * np.sin(2 * np.pi * 0.7 * t + k)
+    return out
+
+
+def test_an_oscillation_is_one_event_over_all_of_it_not_one_swing() -> None:
+    """60 s of oscillation mid-record: one transient spanning the 60 s (the best box alone
+    was one half-swing, 0.5 s, and the rest stayed in the data)."""
+    (event,) = found(swing(unit_means(3), AT, 120, ("gyro_x", "accel_y", "accel_z")))
+    assert event.kind == "transient" and {"gyro_x", "accel_y", "accel_z"} <= set(event.axes)
+    assert event.start_s == pytest.approx(AT * DT, abs=DT)
+    assert event.duration_s == pytest.approx(60.0, abs=2 * DT)
+
+
+@pytest.mark.parametrize("at_end", [False, True])
+def test_a_disturbance_from_the_first_tested_block_reaches_the_record_start(at_end) -> None:
+    """A robot carried to its place for the first (or last) 60 s: the finest scale tests no
+    window within 8 s of either end, so the event found from the first tested block on is
+    taken to begin at the start (end at the end) of the record, and all of it is excised."""
+    first = BLOCKS - 120 if at_end else 0
+    (event,) = found(swing(unit_means(4), first, 120, AXES))
+    a, b = event.excised
+    assert event.kind == "transient"
+    margin = round(max(ev.MARGIN_S, ev.MARGIN_FRACTION * 60.0) / DT)  # 3 s: 6 blocks
+    if at_end:
+        assert (a / 50, b) == (first - margin, BLOCKS * 50)
+    else:
+        assert (a, b / 50) == (0, 120 + margin)
+
+
+def test_hull_spans_the_shortest_flagged_windows_and_reaches_an_end_from_its_untested_margin():
+    n, tested = 1000, {1: (16, 984), 4: (32, 970), 16: (128, 880)}
+    spans = np.array([(16, 17), (40, 41), (40, 44), (100, 116)])
+    assert ev._hull(spans, np.array([1, 1, 4, 16]), tested, n) == (0, 41)  # from the start
+    spans[0] = (17, 18)
+    assert ev._hull(spans, np.array([1, 1, 4, 16]), tested, n) == (17, 41)  # 1 block: shortest
+    assert ev._hull(spans[2:], np.array([4, 16]), tested, n) == (40, 44)  # 4 blocks: shortest
+    assert ev._hull(np.array([(900, 966), (960, 970)]), np.array([4, 4]), tested, n) == (900, n)
+    assert ev._hull(spans[3:], np.array([16]), tested, n) is None  # 8 s windows: the box only
+
+
+def test_a_robot_carried_for_its_first_minute_gives_the_terms_of_the_rest(
+    reports, tmp_path
+) -> None:
+    """The first 60 s moved (0.4 rad/s, 1.5 m/s² swings), then 39 min at rest: the whole
+    minute is excised and N is that of the clean record (it came out 100× too large)."""
+    y = noise(7)
+    t = np.arange(6000) / RATE_HZ
+    for j in range(6):
+        y[:6000, j] += (0.4 if j < 3 else 1.5) * np.sin(2 * np.pi * (0.3 + 0.1 * j) * t + j)
+    doc = analysed(tmp_path, y)
+    (event,) = doc["events"]["found"]
+    assert event["start_s"] == 0.0 and event["duration_s"] == pytest.approx(60.0, abs=1.0)
+    assert event["excised"]["start_s"] == 0.0
+    for name in AXES:
+        n_hat = doc["axes"][name]["ieee952"]["random_walk"]["value"]
+        clean = reports["clean"]["axes"][name]["ieee952"]["random_walk"]["value"]
+        assert n_hat == pytest.approx(clean, rel=0.01)
+
+
+def test_a_sustained_disturbance_does_not_set_the_tail_scale_that_would_hide_it() -> None:
+    """30 000 Gaussian windows with 200 (0.7 %) swinging at ±40: the tail quantile leaves
+    them out (the scale stays ~1; with them it was ~12 and hid them); scattered heavy tails
+    (Student t, 3 dof) still set it, from every window."""
+    rng = np.random.default_rng(11)
+    r = rng.standard_normal(30_000)
+    r[5_000:5_200] += 40 * np.sin(np.arange(200) * 2.2)
+    marked = ev._sustained(r, 3.0)
+    assert marked[5_000:5_200].mean() > 0.95 and marked[:4_980].sum() == 0
+    assert marked[5_220:].sum() == 0
+    assert ev._robust_scale(r) == pytest.approx(1.0, abs=0.1)
+    heavy = rng.standard_t(3, 30_000)
+    assert not ev._sustained(heavy, 3.0 * ev.robust.MAD_TO_SIGMA * np.median(np.abs(heavy))).any()
+    tail = np.quantile(np.abs(heavy), 1 - ev.TAIL_P, method="higher") / -special.ndtri(
+        ev.TAIL_P / 2
+    )
+    assert ev._robust_scale(heavy) == pytest.approx(tail, rel=1e-12)
