@@ -192,6 +192,57 @@ def _send_signals(
             rec.flush()
 
 
+EXCISED_COLOR = (214, 39, 40)
+EXCISED_NAME = "excised: disturbance event"
+
+
+def _floors(frames: pl.DataFrame, columns: dict[str, list[str]], means: dict[str, float]) -> dict:
+    """Where each centred plot's excised-event bars go (:func:`_log_events`): 5 % of the
+    plot's span below the lowest value it draws (its means removed), clear of the data and of
+    the legend in the top left corner."""
+    floors = {}
+    for plot in SIGNAL_PLOTS:
+        names = columns.get(plot.title)
+        if not (plot.centred and names):
+            continue
+        lows, highs = [], []
+        for c in names:
+            y = frames[c].cast(pl.Float64).fill_nan(None)
+            if y.min() is not None:
+                lows.append(float(y.min()) - means[c])
+                highs.append(float(y.max()) - means[c])
+        if lows:
+            floors[plot.title] = min(lows) - 0.05 * (max(highs) - min(lows))
+    return floors
+
+
+def _log_events(rec: rr.RecordingStream, result: AnalysisResult, floors: dict[str, float]) -> None:
+    """Each disturbance event excised on every axis as a red bar over its interval below the
+    gyro and accel signal plots' data (``floors``: :func:`_floors`), on the recording's
+    timeline: entity ``<plot>/excised``, a child of the plot (its view shows it), a NaN after
+    each event breaking the line."""
+    found = result.events
+    if found is None:
+        return
+    spans = [e.excised for e in found.events if e.excised is not None]
+    if not spans:
+        return
+    t_s = found.t0_stamp_s + found.tau0_s * np.array([[a, b, b] for a, b in spans]).ravel()
+    t_ns = np.round(t_s * 1e9).astype("timedelta64[ns]")
+    for plot in SIGNAL_PLOTS:
+        if plot.title not in floors:
+            continue
+        entity = f"{plot.entity}/excised"
+        style = rr.SeriesLines(names=EXCISED_NAME, colors=[EXCISED_COLOR], widths=3.0)
+        rec.log(entity, style, static=True)
+        level = np.tile([floors[plot.title], floors[plot.title], np.nan], len(spans))
+        rec.send_columns(
+            entity,
+            indexes=[rr.TimeColumn(TIMELINE, duration=t_ns)],
+            columns=rr.Scalars.columns(scalars=level),
+        )
+
+
 def _log10(values: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.log10(np.asarray(values, dtype=float))
@@ -575,6 +626,7 @@ class RrdWriter:
             math.ceil(n / ENVELOPE_BINS) * float(t[-1] - t[0]) / (n - 1) if enveloped else None
         )
         means = _means(frames, columns)
+        self._floors = _floors(frames, columns, means)
         self._rec = rec = rr.RecordingStream(
             "imupipe", make_default=False, make_thread_default=False
         )
@@ -605,6 +657,7 @@ class RrdWriter:
             rr.TextDocument(summary_markdown(result), media_type="text/markdown"),
             static=True,
         )
+        _log_events(rec, result, self._floors)
         self._sender.join()
         rec.send_blueprint(blueprint(result, self.groups, self.bin_s))
         rec.flush()

@@ -7,6 +7,7 @@ archetypes logged (a recording stand-in that keeps them)."""
 from __future__ import annotations
 
 import subprocess
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ import pytest
 import rerun.blueprint as rrb
 
 import imupipe.report.rerun_view as rv
+from imupipe.analysis.events import DisturbanceEvent, EventDetector, EventsFound
 from imupipe.errors import ViewerError
 from imupipe.report.rerun_view import open_viewer, rerun_executable, signal_columns, write_rrd
 from imupipe.units import from_si
@@ -258,3 +260,63 @@ def test_fleet_view_names_units_by_path_and_labels_the_band_where_it_is_widest()
     }
     at = rec.logged["allan/gyro_x/population/hi/label"].positions.as_arrow_array().to_pylist()
     assert at[0] == pytest.approx([3.0, -np.log10(pop["hi"][-1])])  # log10 τ = 3, y down
+
+
+def _with_events(result, spans: list[tuple[int, int] | None], tau0: float, t0: float):
+    """``result`` with disturbance events excised over sample ``spans`` (None: a step, kept)."""
+    events = tuple(
+        DisturbanceEvent(
+            (a or 0) * tau0,
+            1.0,
+            ("gyro_x",),
+            {},
+            {},
+            {},
+            "transient" if a is not None else "step",
+            None if a is None else (a, b),
+            0.5,
+        )
+        for a, b in (s or (None, None) for s in spans)
+    )
+    detector = EventDetector(0.5, (0.5,), (100,), (6.0,), (4.5,), ("gyro_x",), (0.0,))
+    return replace(result, events=EventsFound(detector, events, tau0, t0))
+
+
+def test_excised_events_are_red_bars_below_the_signals_on_the_recording_timeline(
+    tmp_path: Path, synthetic_result, rrd_chunks
+) -> None:
+    """Two excised events (and a kept step, not drawn) on a segment starting 3 s into the
+    recording: each a bar from its first to its last excised sample's time, below the lowest
+    value the gyro and accel plots draw, a NaN after it; not on temperature or supply."""
+    frames = _frames(20_000)
+    result = _with_events(synthetic_result(), [(1_000, 1_500), None, (6_000, 6_200)], 0.01, 3.0)
+    sent: dict[str, tuple] = {}
+
+    class Keep:
+        def log(self, path, archetype, static=False):
+            sent.setdefault(path, [None, None])[0] = archetype
+
+        def send_columns(self, path, indexes, columns):
+            sent.setdefault(path, [None, None])[1] = (indexes, columns)
+
+    columns = signal_columns(frames)
+    floors = rv._floors(frames, columns, rv._means(frames, columns))
+    low = min(frames[c].min() - frames[c].mean() for c in ("gyro_x", "gyro_y", "gyro_z"))
+    high = max(frames[c].max() - frames[c].mean() for c in ("gyro_x", "gyro_y", "gyro_z"))
+    assert floors["gyro"] == pytest.approx(low - 0.05 * (high - low), rel=1e-9)
+    assert set(floors) == {"gyro", "accel"}
+    rv._log_events(Keep(), result, floors)
+    assert set(sent) == {"signals/gyro/excised", "signals/accel/excised"}
+    style, (indexes, cols) = sent["signals/gyro/excised"]
+    assert style.names.as_arrow_array().to_pylist() == [rv.EXCISED_NAME]
+    times = indexes[0].as_arrow_array().to_numpy().astype("int64") / 1e9
+    np.testing.assert_allclose(times, [13.0, 18.0, 18.0, 63.0, 65.0, 65.0])
+    (column,) = cols
+    values = np.asarray(column.as_arrow_array().to_pylist()).ravel()
+    np.testing.assert_array_equal(np.isnan(values), [False, False, True] * 2)
+    assert values[0] == values[4] == floors["gyro"]
+    path = write_rrd(result, frames, tmp_path / "events.rrd")
+    assert _verify(path).returncode == 0
+    assert rrd_chunks.rows(path)["/signals/accel/excised"] == 6
+    plain = write_rrd(synthetic_result(), frames, tmp_path / "none.rrd")  # no events: no bars
+    assert not any("excised" in e for e in rrd_chunks.rows(plain))
