@@ -292,6 +292,25 @@ def test_a_time_window_analyses_what_the_same_frames_alone_give(
                     assert value["value"] == pytest.approx(theirs["value"], rel=1e-9)
 
 
+@pytest.mark.parametrize("offset_ms", [0, 3])
+def test_two_imus_publishing_on_one_topic_are_one_line_not_a_crash(
+    tmp_path: Path, capsys, offset_ms: int
+) -> None:
+    """Two 100 Hz IMUs on one topic, stamped together or 3 ms apart: no uniform grid keeps two
+    consecutive samples, so no averaging time is left.  It was an IndexError deep in the fit
+    (``imupipe: internal error``, exit 1); now one line, exit 2, naming the likely cause."""
+    stamps, gyro, accel = imu_stream(6000)
+    merged = np.empty(12_000, np.int64)
+    merged[0::2], merged[1::2] = stamps, stamps + offset_ms * 1_000_000
+    path = write_imu_topics(
+        tmp_path / "f.mcap", {"/imu": (merged, np.repeat(gyro, 2, 0), np.repeat(accel, 2, 0))}
+    )
+    code, _, err = analyze(path, capsys)
+    assert code == 2 and err.count("\n") == 1
+    assert "the longest run of clean samples is" in err
+    assert "several IMUs publishing on one topic?" in err
+
+
 def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> None:
     streams = {t: imu_stream(3000, seed=k) for k, t in enumerate(["/imu0/data", "/imu1/data"])}
     path = write_imu_topics(tmp_path / "f.mcap", streams)

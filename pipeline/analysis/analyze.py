@@ -130,12 +130,25 @@ class Outputs(Protocol):
         """The analysis failed after :meth:`begin`: remove what was started."""
 
 
-def check_frames(rec: ImuRecording, n: int) -> None:
-    if n < MIN_FRAMES:
+def check_frames(rec: ImuRecording, series: ConditionedSeries) -> None:
+    """Refuse a recording without :data:`MIN_FRAMES` consecutive clean samples: its Allan
+    variance has no averaging time to fit.  On the masked grid (policy ``"mask"``) that is a
+    set of stamps that are not one uniformly sampled stream, e.g. two IMUs publishing on one
+    topic (every other grid place missing: no window of two samples whole)."""
+    n = series.longest_clean_run
+    if n >= MIN_FRAMES:
+        return
+    if series.excluded is None:
         raise TooFewFramesError(
             f"{rec.path}: the longest clean segment has {n} frames, too few for any "
             f"averaging time (need at least {MIN_FRAMES})"
         )
+    raise TooFewFramesError(
+        f"{rec.path}: on the sample grid of {series.samples} samples at {series.rate_hz:.6g} Hz "
+        f"the longest run of clean samples is {n}, too few for any averaging time (need at "
+        f"least {MIN_FRAMES}): the stamps are not one uniformly sampled stream (several IMUs "
+        "publishing on one topic?)"
+    )
 
 
 def axis_result(
@@ -389,7 +402,7 @@ def analyze(
                 load_kernels(options.loop)
         rec = source.conditioning()
         series = condition(rec, options.gaps, options.start_s, options.end_s)
-        check_frames(rec, series.usable_samples)
+        check_frames(rec, series)
         t0_stamp_s = float(rec.frames["t_s"][series.rows.start])  # the first analysed sample
         frames = rec.frames.height
         about = replace(rec, frames=rec.frames.clear())

@@ -133,6 +133,12 @@ class ConditionedSeries:
         return self.segment.frames if self.excluded is None else len(self.excluded)
 
     @property
+    def longest_clean_run(self) -> int:
+        """Consecutive usable samples in the longest clean stretch: the chosen segment's frames,
+        or (policy ``"mask"``) the longest run of grid samples of which none is excluded."""
+        return self.segment.frames if self.excluded is None else _longest_run(~self.excluded)
+
+    @property
     def usable_samples(self) -> int:
         """Samples that carry data (the grid places not excluded)."""
         return self.samples - (0 if self.excluded is None else int(self.excluded.sum()))
