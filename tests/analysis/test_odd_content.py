@@ -27,7 +27,7 @@ from imupipe.testing.busy_bag import Stream, write_bag
 from imupipe.testing.ros_cdr import imu_payloads
 
 EDITS = ("quant", "const_axis", "nan_burst", "step", "dup_stamps", "reverse", "gap", "jitter",
-         "spike", "const_block", "ramp", "tone", "frozen_clock")  # fmt: skip
+         "spike", "const_block", "ramp", "tone", "frozen_clock", "two_streams")  # fmt: skip
 
 
 def odd_bag(path: Path, n: int, rate: float, scale: float, offset: float, edits, seed: int):
@@ -63,6 +63,8 @@ def odd_bag(path: Path, n: int, rate: float, scale: float, offset: float, edits,
             y[:, axis] += np.linspace(0, 1e3 * scale, n)
         elif name == "tone":
             y[:, axis] += 5e3 * scale * np.sin(0.3 * np.arange(n))
+        elif name == "two_streams":  # a second IMU on the topic, ``where`` of a period later
+            t[1::2] = t[0 : n - 1 : 2] + int(where * 1e9 / rate)
         else:  # frozen_clock: stamps advance a thousand times too slowly
             t[a:b] = t[a] + (t[a:b] - t[a]) // 1000
     payloads = [row.tobytes() for row in imu_payloads(t, y[:, :3], y[:, 3:])]
