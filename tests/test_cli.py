@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from imupipe.device.adis16364 import FrameBlock, config_for_rate
+from imupipe.errors import ImupipeError
 from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.recording.recorder import FrameWriter
 from imupipe.recording.simulator import VirtualADIS16364
@@ -188,3 +189,21 @@ def test_the_command_is_the_console_entry_point() -> None:
 
     (script,) = entry_points(group="console_scripts", name="imupipe")
     assert script.value == "imupipe.cli:console"
+
+
+def test_fleet_passes_the_time_window_to_every_unit(tmp_path: Path, cli, monkeypatch) -> None:
+    """``imupipe fleet --start 600 --end -300``: every unit's analysis gets the window (as
+    ``imupipe analyze`` does); run_fleet stands in for the cluster."""
+    import imupipe.fleet.run as fleet_run
+
+    seen = {}
+
+    def stand_in(recordings, out, **kw):
+        seen.update(kw)
+        raise ImupipeError("stop here")
+
+    monkeypatch.setattr(fleet_run, "run_fleet", stand_in)
+    code, _, err = cli(["fleet", str(tmp_path), "--out", str(tmp_path / "f"), "-q",
+                        "--start", "600", "--end", "-300"])  # fmt: skip
+    assert code == 2 and "stop here" in err
+    assert (seen["options"].start_s, seen["options"].end_s) == (600.0, -300.0)
