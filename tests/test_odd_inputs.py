@@ -37,6 +37,7 @@ from imupipe.device.frame_schema import (
 from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.recording.recorder import FrameWriter
 from imupipe.recording.simulator import VirtualADIS16364
+from imupipe.testing.busy_bag import Stream, write_bag
 from imupipe.testing.ros_cdr import imu_payloads
 from imupipe.vocab import AXES
 
@@ -292,23 +293,50 @@ def test_a_time_window_analyses_what_the_same_frames_alone_give(
                     assert value["value"] == pytest.approx(theirs["value"], rel=1e-9)
 
 
+def two_imus_on_one_topic(path: Path, offset_ms: float) -> Path:
+    """Two 100 Hz IMUs (frames imu_left, imu_right; the right one 5× noisier) publishing on
+    /imu, the right one stamped ``offset_ms`` after the left, in arrival order."""
+    stamps, gyro, accel = imu_stream(6000)
+    payloads: list[bytes] = [b""] * 12_000
+    times = np.empty(12_000, np.int64)
+    for k, frame in enumerate(("imu_left", "imu_right")):
+        at = stamps + round(k * offset_ms * 1e6)
+        rows = imu_payloads(at, gyro * (1 + 4 * k), accel, frame_id=frame)
+        payloads[k::2] = [r.tobytes() for r in rows]
+        times[k::2] = at
+    write_bag(path, [Stream("/imu", IMU_SCHEMA, payloads, times)], "")
+    return path
+
+
 @pytest.mark.parametrize("offset_ms", [0, 3])
 def test_two_imus_publishing_on_one_topic_are_one_line_not_a_crash(
     tmp_path: Path, capsys, offset_ms: int
 ) -> None:
-    """Two 100 Hz IMUs on one topic, stamped together or 3 ms apart: no uniform grid keeps two
-    consecutive samples, so no averaging time is left.  It was an IndexError deep in the fit
-    (``imupipe: internal error``, exit 1); now one line, exit 2, naming the likely cause."""
-    stamps, gyro, accel = imu_stream(6000)
-    merged = np.empty(12_000, np.int64)
-    merged[0::2], merged[1::2] = stamps, stamps + offset_ms * 1_000_000
-    path = write_imu_topics(
-        tmp_path / "f.mcap", {"/imu": (merged, np.repeat(gyro, 2, 0), np.repeat(accel, 2, 0))}
-    )
-    code, _, err = analyze(path, capsys)
+    """Stamped together or 3 ms apart, no uniform grid keeps two consecutive samples, so no
+    averaging time is left.  It was an IndexError deep in the fit (``imupipe: internal
+    error``, exit 1); now one line, exit 2, naming the likely cause and the frames."""
+    code, _, err = analyze(two_imus_on_one_topic(tmp_path / "f.mcap", offset_ms), capsys)
     assert code == 2 and err.count("\n") == 1
     assert "the longest run of clean samples is" in err
-    assert "several IMUs publishing on one topic?" in err
+    assert "several IMUs publishing on one topic? Its messages carry header.frame_id " in err
+    assert "'imu_left', 'imu_right'" in err
+
+
+def test_two_imus_half_a_period_apart_are_analysed_with_a_warning(tmp_path: Path, capsys):
+    """5 ms apart, the two streams look like one at 200 Hz (and give a mixture's terms): the
+    frames the topic carries are named in a warning; one IMU per topic gets none."""
+    code, report, _ = analyze(two_imus_on_one_topic(tmp_path / "f.mcap", 5), capsys)
+    assert code == 0 and report["input"]["rate_hz"] == pytest.approx(200.0)
+    warning = (
+        "topic /imu carries messages of 2 frames (header.frame_id 'imu_left', 'imu_right') "
+        "among its first 64: if several IMUs publish on it, they are analysed as one stream"
+    )
+    assert any(w.startswith(warning) for w in report["input"]["warnings"])
+    stamps, gyro, accel = imu_stream(3000)
+    (tmp_path / "one").mkdir()
+    one = write_imu_topics(tmp_path / "one" / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    _, single, _ = analyze(one, capsys)
+    assert not any("frames (header.frame_id" in w for w in single["input"]["warnings"])
 
 
 def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> None:

@@ -36,7 +36,7 @@ from typing import Literal
 import numpy as np
 
 from imupipe.errors import ImupipeError
-from imupipe.io.decode import ImuRecording, nonfinite_bits
+from imupipe.io.decode import FRAME_ID_SAMPLE, ImuRecording, nonfinite_bits
 from imupipe.stats import robust
 from imupipe.stats.allan import clean_runs
 from imupipe.vocab import AXES
@@ -463,6 +463,14 @@ def condition(
     if n < 2:
         raise ImupipeError(f"{rec.path}: {n} frame(s), too few for any averaging time")
     warnings = list(rec.warnings)
+    if len(rec.frame_ids) > 1:
+        shown = ", ".join(f"'{f}'" for f in rec.frame_ids[:4])
+        warnings.append(
+            f"topic {rec.topic} carries messages of {len(rec.frame_ids)} frames (header.frame_id "
+            f"{shown}{', ...' if len(rec.frame_ids) > 4 else ''}) among its first "
+            f"{FRAME_ID_SAMPLE}: if several IMUs publish on it, they are analysed as one stream "
+            "(give each its own topic)"
+        )
     regimes = rate_regimes(df["t_s"].to_numpy())
     if len(regimes) > 1:  # analyse the longest part at one rate, as if the rest were a gap
         first, stop, step = max(regimes, key=lambda r: r[1] - r[0])

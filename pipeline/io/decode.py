@@ -109,6 +109,14 @@ class ImuRecording:
     warnings: list[str] = field(default_factory=list)
     topics: list[str] = field(default_factory=list)
     temperature_topic: str | None = None
+    frame_ids: tuple[str, ...] = ()
+    """The distinct ``header.frame_id`` values among the first :data:`FRAME_ID_SAMPLE`
+    messages of an Imu topic (more than one: messages of several sensors on one topic?)."""
+
+
+FRAME_ID_SAMPLE = 64
+"""Messages of each topic whose ``header.frame_id`` is read: several IMUs publishing on one
+topic interleave from the start."""
 
 
 @dataclass(frozen=True)
@@ -439,6 +447,13 @@ def _frame_id(payload: np.ndarray) -> str:
     return payload[16 : 16 + size - 1].tobytes().decode("utf-8", "replace")
 
 
+def _frame_ids(payloads: list[np.ndarray]) -> tuple[str, ...]:
+    """The distinct ``header.frame_id`` values of the CDR ``payloads`` whose frame_id length
+    fits them (:func:`_frame_id`), sorted."""
+    fits = (p for p in payloads if len(p) >= 16 and 1 <= p[12:16].view("<u4")[0] <= len(p) - 16)
+    return tuple(sorted({_frame_id(p) for p in fits}))
+
+
 def _sibling_temperature(
     imu_topic: str, temp_topics: list[str], frame_ids: dict[str, str]
 ) -> str | None:
@@ -526,6 +541,7 @@ class ScannedRecording:
     warnings: list[str]
     topics: list[str]
     temperature_topic: str | None = None
+    frame_ids: tuple[str, ...] = ()
 
     @property
     def rows(self) -> int:
@@ -580,6 +596,7 @@ class ScannedRecording:
             warnings=warnings,
             topics=self.topics,
             temperature_topic=self.temperature_topic,
+            frame_ids=self.frame_ids,
         )
 
 
@@ -704,6 +721,7 @@ def scan(
         decoders[topic_kind[name]](_CdrMessages(rows, log_time), channels[name])
 
     frame_ids: dict[str, str] = {}  # the header.frame_id of each topic's first message
+    frame_sets: dict[str, tuple[str, ...]] = {}  # those of its first FRAME_ID_SAMPLE messages
     compression = message_compression(path)
     for file in files:
         offset = done
@@ -721,6 +739,7 @@ def scan(
                 if batch.first is not None:
                     if name not in frame_ids:
                         frame_ids[name] = _frame_id(batch.first)
+                        frame_sets[name] = _frame_ids(batch.payloads(FRAME_ID_SAMPLE))
                     waiting[name].append((batch.rows, batch.log_time))
                     waiting_rows[name] += len(batch)
                     if waiting_rows[name] >= _DECODE_ROWS or len(waiting[name]) >= _DECODE_BATCHES:
@@ -804,4 +823,5 @@ def scan(
         warnings=warnings,
         topics=imu_topics,
         temperature_topic=temp_topic,
+        frame_ids=frame_sets.get(topic, ()) if topic_kind[topic] == "imu" else (),
     )

@@ -144,6 +144,7 @@ class CdrBatch:
         rows: ``(n, layout.width)`` uint8, one per well-formed message.
         bad: messages of the batch that are not well-formed for the layout (not in ``rows``).
         first: the payload of the first well-formed message (None if there is none).
+        source: the bytes and the :class:`MessageIndex` the rows were made from.
     """
 
     channel_id: int
@@ -151,9 +152,19 @@ class CdrBatch:
     rows: np.ndarray
     bad: int
     first: np.ndarray | None
+    source: tuple[np.ndarray, MessageIndex] | None = None
 
     def __len__(self) -> int:
         return len(self.rows)
+
+    def payloads(self, count: int) -> list[np.ndarray]:
+        """The payloads (views of the batch's bytes) of its channel's first ``count`` messages,
+        well-formed or not."""
+        if self.source is None:
+            return []
+        data, index = self.source
+        at = np.flatnonzero(index.channel == self.channel_id)[:count].tolist()
+        return [data[int(index.offset[i]) : int(index.offset[i] + index.size[i])] for i in at]
 
 
 def cdr_batches_of(
@@ -168,7 +179,9 @@ def cdr_batches_of(
         if first >= 0:
             at = int(index.offset[first])
             payload = data[at : at + int(index.size[first])]
-        yield CdrBatch(channel_ids[s], rows.log_time[s], rows.rows[s], int(rows.bad[s]), payload)
+        yield CdrBatch(
+            channel_ids[s], rows.log_time[s], rows.rows[s], int(rows.bad[s]), payload, (data, index)
+        )
 
 
 @dataclass(frozen=True)

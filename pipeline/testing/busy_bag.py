@@ -107,10 +107,16 @@ def _stamped(template: bytes, times: np.ndarray, at: int) -> list[bytes]:
 
 
 def imu_stream(
-    topic: str, seconds: float, rate_hz: float, seed: int, awkward: bool = True
+    topic: str,
+    seconds: float,
+    rate_hz: float,
+    seed: int,
+    awkward: bool = True,
+    frame_ids: tuple[str, ...] = FRAME_IDS,
 ) -> Stream:
-    """An Imu topic with :data:`FRAME_IDS` cycled and, if ``awkward``, the :data:`AWKWARD`
-    values among the first gyro and last accelerometer samples."""
+    """An Imu topic with ``frame_ids`` cycled (default :data:`FRAME_IDS`: lengths that move
+    the fields) and, if ``awkward``, the :data:`AWKWARD` values among the first gyro and last
+    accelerometer samples."""
     rng = np.random.default_rng(seed)
     log_time = _times(seconds, rate_hz, rng)
     n = len(log_time)
@@ -121,8 +127,8 @@ def imu_stream(
         gyro.flat[: min(len(AWKWARD), gyro.size)] = AWKWARD[: gyro.size]
         accel.flat[-min(len(AWKWARD), accel.size) :] = AWKWARD[: accel.size][::-1]
     payloads: list[bytes] = [b""] * n
-    for k, fid in enumerate(FRAME_IDS):
-        rows = np.arange(k, n, len(FRAME_IDS))
+    for k, fid in enumerate(frame_ids):
+        rows = np.arange(k, n, len(frame_ids))
         block = imu_payloads(stamps[rows], gyro[rows], accel[rows], 0.01 * k, frame_id=fid)
         for i, row in zip(rows.tolist(), block, strict=True):
             payloads[i] = row.tobytes()
@@ -303,5 +309,5 @@ def write_robot_bag(directory: Path, seconds: float = 300.0, rate_hz: float = 10
     0.03 m/s² rms, gravity on z, no awkward values), ``/imu/temperature`` (10 Hz) and ``/tf``
     (100 Hz); returns the MCAP file."""
     others = [s for s in other_streams(seconds, camera=False, seed=1) if s.topic != "/odom"]
-    imu = imu_stream("/imu/data", seconds, rate_hz, seed=0, awkward=False)
+    imu = imu_stream("/imu/data", seconds, rate_hz, seed=0, awkward=False, frame_ids=("imu_link",))
     return write_rosbag2(directory, [imu, *others])
