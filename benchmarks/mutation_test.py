@@ -70,6 +70,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/io/test_ros_bags.py",
     ),
     "pipeline/analysis/events.py": ("tests/analysis/test_events.py",),
+    "pipeline/analysis/at_rest.py": ("tests/analysis/test_at_rest.py",),
     "pipeline/io/mcap_scan.py": (
         "tests/io/test_fuzz_decoder.py",
         "tests/io/test_busy_bags.py",
