@@ -498,3 +498,23 @@ def test_a_sustained_disturbance_does_not_set_the_tail_scale_that_would_hide_it(
         ev.TAIL_P / 2
     )
     assert ev._robust_scale(heavy) == pytest.approx(tail, rel=1e-12)
+
+
+def test_the_tail_scale_needs_ten_windows_beyond_its_quantile_once_sustained_ones_are_out():
+    """Scattered heavy tails (Student t, 3 dof): 9 000 windows hold 9 beyond the 99.9 %
+    quantile, too few, so the winsorised scale alone counts; 30 000 hold 30.  With 3 000 of
+    12 000 in a sustained disturbance, the 9 000 left are too few as well."""
+    rng = np.random.default_rng(12)
+    few = rng.standard_t(3, 9_000)
+    sigma0 = ev.robust.MAD_TO_SIGMA * np.median(np.abs(few))
+    winsorised = np.sqrt(np.mean(np.clip(few, -3 * sigma0, 3 * sigma0) ** 2) / ev.WINSOR_VAR)
+    assert ev._robust_scale(few) == pytest.approx(winsorised, rel=1e-12)
+    many = rng.standard_t(3, 30_000)
+    assert ev._robust_scale(many) > 1.2 * ev._robust_scale(many[:9_000])  # the tail floor
+    mixed = np.concatenate([rng.standard_t(3, 9_000), 40 * np.sin(np.arange(3_000) * 2.2)])
+    assert ev._sustained(mixed, 3.0).sum() >= 2_990
+    sigma0 = ev.robust.MAD_TO_SIGMA * np.median(np.abs(mixed))
+    clipped = np.clip(mixed, -3 * sigma0, 3 * sigma0)
+    assert ev._robust_scale(mixed) == pytest.approx(
+        np.sqrt(np.mean(clipped**2) / ev.WINSOR_VAR), rel=1e-12
+    )
