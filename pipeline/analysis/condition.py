@@ -447,6 +447,8 @@ def condition(
         given = f"--start {start_s:g}" + ("" if end_s is None else f" --end {end_s:g}")
         raise ImupipeError(f"the time window needs a finite --start >= 0 and --end (s): {given}")
     df = rec.frames
+    if df.height < 2:
+        raise ImupipeError(f"{rec.path}: {df.height} frame(s), too few for any averaging time")
     offset = 0
     if start_s != 0.0 or end_s is not None:
         t = df["t_s"].to_numpy()
@@ -460,8 +462,6 @@ def condition(
         offset = rows.start
         df = df.slice(offset, rows.stop - offset)
     n = df.height
-    if n < 2:
-        raise ImupipeError(f"{rec.path}: {n} frame(s), too few for any averaging time")
     warnings = list(rec.warnings)
     if len(rec.frame_ids) > 1:
         shown = ", ".join(f"'{f}'" for f in rec.frame_ids[:4])
