@@ -31,6 +31,7 @@ from imupipe.analysis.condition import (
     ConditionedSeries,
     GapPolicy,
     condition,
+    named_frames,
     no_axis_error,
     stuck_warning,
     unanalysable,
@@ -143,13 +144,14 @@ def check_frames(rec: ImuRecording, series: ConditionedSeries) -> None:
             f"{rec.path}: the longest clean segment has {n} frames, too few for any "
             f"averaging time (need at least {MIN_FRAMES})"
         )
-    frames = ", ".join(f"'{f}'" for f in rec.frame_ids[:4])
+    frames = (
+        f" Its messages carry header.frame_id {named_frames(rec)}" if len(rec.frame_ids) > 1 else ""
+    )
     raise TooFewFramesError(
         f"{rec.path}: on the sample grid of {series.samples} samples at {series.rate_hz:.6g} Hz "
         f"the longest run of clean samples is {n}, too few for any averaging time (need at "
         f"least {MIN_FRAMES}): the stamps are not one uniformly sampled stream (several IMUs "
-        "publishing on one topic?"
-        + (f" Its messages carry header.frame_id {frames})" if len(rec.frame_ids) > 1 else ")")
+        f"publishing on one topic?{frames})"
     )
 
 

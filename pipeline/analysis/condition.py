@@ -236,6 +236,12 @@ def unanalysable(y: np.ndarray) -> str | None:
     return None
 
 
+def named_frames(rec: ImuRecording) -> str:
+    """The ``header.frame_id`` values of ``rec``'s first messages, quoted, at most four."""
+    shown = ", ".join(f"'{f}'" for f in rec.frame_ids[:4])
+    return shown + (", ..." if len(rec.frame_ids) > 4 else "")
+
+
 ABSENT = "is NaN/inf in every frame (an axis the sensor does not provide?)"
 """Why an axis of :attr:`ConditionedSeries.absent_axes` is not analysed."""
 
@@ -464,12 +470,10 @@ def condition(
     n = df.height
     warnings = list(rec.warnings)
     if len(rec.frame_ids) > 1:
-        shown = ", ".join(f"'{f}'" for f in rec.frame_ids[:4])
         warnings.append(
             f"topic {rec.topic} carries messages of {len(rec.frame_ids)} frames (header.frame_id "
-            f"{shown}{', ...' if len(rec.frame_ids) > 4 else ''}) among its first "
-            f"{FRAME_ID_SAMPLE}: if several IMUs publish on it, they are analysed as one stream "
-            "(give each its own topic)"
+            f"{named_frames(rec)}) among its first {FRAME_ID_SAMPLE}: if several IMUs publish on "
+            "it, they are analysed as one stream (give each its own topic)"
         )
     regimes = rate_regimes(df["t_s"].to_numpy())
     if len(regimes) > 1:  # analyse the longest part at one rate, as if the rest were a gap

@@ -508,8 +508,8 @@ def _event(
 ) -> DisturbanceEvent:  # fmt: skip
     """One merged component of flagged windows as an event (steps 4–5); ``blocks``: each
     row of ``x``'s place on the record's block grid (times and excision are on the grid);
-    ``hull``: the blocks flagged at the finest scale (:func:`_hull`), which the event spans
-    whatever its best box (an oscillation's box is one swing of it)."""
+    ``hull``: the blocks of its windows flagged at their shortest length (:func:`_hull`),
+    which the event spans whatever its best box (an oscillation's box is one swing of it)."""
     span = max(stop - first, round(LEVEL_SPAN_S / dt))
     outside = np.concatenate([x[max(first - span, 0) : first], x[stop : stop + span]])
     level = np.median(outside, axis=0)  # never empty: windows start after their neighbours

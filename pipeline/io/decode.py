@@ -438,20 +438,24 @@ def _namespace(topic: str) -> str:
     return topic.rpartition("/")[0]
 
 
-def _frame_id(payload: np.ndarray) -> str:
+def _frame_id_or_none(payload: np.ndarray) -> str | None:
     """``header.frame_id`` of a CDR payload (u32 length with its NUL at byte 12, then the
-    bytes); empty when the length does not fit the payload."""
+    bytes); None when the length does not fit the payload."""
     size = int(payload[12:16].view("<u4")[0]) if len(payload) >= 16 else 0
     if not 1 <= size <= len(payload) - 16:
-        return ""
+        return None
     return payload[16 : 16 + size - 1].tobytes().decode("utf-8", "replace")
+
+
+def _frame_id(payload: np.ndarray) -> str:
+    """:func:`_frame_id_or_none`, empty when the length does not fit the payload."""
+    return _frame_id_or_none(payload) or ""
 
 
 def _frame_ids(payloads: list[np.ndarray]) -> tuple[str, ...]:
     """The distinct ``header.frame_id`` values of the CDR ``payloads`` whose frame_id length
-    fits them (:func:`_frame_id`), sorted."""
-    fits = (p for p in payloads if len(p) >= 16 and 1 <= p[12:16].view("<u4")[0] <= len(p) - 16)
-    return tuple(sorted({_frame_id(p) for p in fits}))
+    fits them (:func:`_frame_id_or_none`), sorted."""
+    return tuple(sorted({f for p in payloads if (f := _frame_id_or_none(p)) is not None}))
 
 
 def _sibling_temperature(

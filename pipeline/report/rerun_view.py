@@ -208,9 +208,10 @@ def _floors(frames: pl.DataFrame, columns: dict[str, list[str]], means: dict[str
         lows, highs = [], []
         for c in names:
             y = frames[c].cast(pl.Float64).fill_nan(None)
-            if y.min() is not None:
-                lows.append(float(y.min()) - means[c])
-                highs.append(float(y.max()) - means[c])
+            lo, hi = y.min(), y.max()
+            if lo is not None:
+                lows.append(float(lo) - means[c])
+                highs.append(float(hi) - means[c])
         if lows:
             floors[plot.title] = min(lows) - 0.05 * (max(highs) - min(lows))
     return floors
