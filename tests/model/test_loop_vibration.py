@@ -117,16 +117,25 @@ def test_a_welch_band_mean_has_the_hann_windows_variance():
     assert effects.welch_band_variance(256, 1, 0) == np.inf  # an empty band says nothing
 
 
-@pytest.mark.parametrize("cores", [1, 3])
-def test_welch_psd_is_scipys_welch_of_the_first_samples_on_any_number_of_cores(cores, monkeypatch):
-    """The segments' FFTs run on the calling thread's cores: the same PSD, bit for bit, as
-    scipy's Welch on one core, of the first PSD_MAX_SAMPLES samples only."""
-    monkeypatch.setattr(effects, "cores_here", lambda: cores)
+@pytest.mark.parametrize("seg", [64, 255, 1024])
+def test_welch_psd_is_scipys_welch_of_the_first_samples_in_blocks_on_any_number_of_cores(
+    seg, monkeypatch
+):
+    """scipy's Welch (Hann, half overlap, each segment's mean removed, density, one-sided) of
+    the first PSD_MAX_SAMPLES samples only, to rounding, an odd segment length included;
+    the same bits whatever the block size and the calling thread's cores."""
     monkeypatch.setattr(effects, "PSD_MAX_SAMPLES", 30_000)
-    y = np.random.default_rng(3).standard_normal(40_000)
-    f, p = effects.welch_psd(y, 0.01, 1024)
-    f_ref, p_ref = signal.welch(y[:30_000], fs=100.0, nperseg=1024)
-    assert np.array_equal(f, f_ref) and np.array_equal(p, p_ref)
+    y = 5.0 + np.random.default_rng(3).standard_normal(40_000)  # a mean: the detrend matters
+    f_ref, p_ref = signal.welch(y[:30_000], fs=100.0, nperseg=seg)
+    results = []
+    for cores, block in [(1, 1 << 20), (3, 1 << 20), (1, 3 * seg)]:  # 3 segments a block
+        monkeypatch.setattr(effects, "cores_here", lambda cores=cores: cores)
+        monkeypatch.setattr(effects, "WELCH_BLOCK_SAMPLES", block)
+        results.append(effects.welch_psd(y, 0.01, seg))
+    for f, p in results:
+        assert np.array_equal(f, f_ref)
+        np.testing.assert_allclose(p, p_ref, rtol=1e-12, atol=0)
+    assert np.array_equal(results[0][1], results[1][1])  # cores: each segment's own transform
 
 
 @pytest.mark.parametrize("view", ["rolloff", "band_excess"])
