@@ -72,14 +72,20 @@ class _Pooled:
         sums = np.add.reduceat(x, start, axis=0)
         return sums / (count if x.ndim == 1 else count[:, None])
 
-    def deviance(self, f0: float, w: float) -> float:
-        """Whittle deviance of the pools against the floor columns plus the line at (f0, w)."""
+    def fit(self, f0: float, w: float, start: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """Whittle fit of the pools to the floor columns plus the line at (f0, w): the linear
+        coefficients (white, flicker, line) and the deviance; ``start``: the coefficients to
+        begin from (:func:`ieee952.fit_nonneg_gamma`), default 0."""
         if self.line_mean:
             line = self._mean(self.start, self.count, oscillator_psd(self.freqs, f0, w))
         else:
             line = oscillator_psd(self.centre, f0, w)
         design = np.column_stack([self.floor, line])
-        return ieee952.fit_nonneg_gamma(design, self.power, WHITTLE_EDF * self.count)[1]
+        return ieee952.fit_nonneg_gamma(design, self.power, WHITTLE_EDF * self.count, start=start)
+
+    def deviance(self, f0: float, w: float) -> float:
+        """Whittle deviance of the pools against the floor columns plus the line at (f0, w)."""
+        return self.fit(f0, w)[1]
 
 
 @dataclass(frozen=True)
@@ -135,7 +141,16 @@ def line_centre(
         if freqs[0] < c < freqs[-1]
     ]
     pooled = _Pooled.of(freqs, power, -(-power.size // COARSE_ORDINATES), line_mean=True)
-    c1, w1 = min(coarse, key=lambda cw: pooled.deviance(*cw))
+    # each width's centres in turn, each fit begun from the previous centre's coefficients:
+    # the same minima in ~half the scoring iterations (a real ADIS16405's 10 Hz line: 11 →
+    # 4–5 on 2,041 pools), and a fit that would stop at its iteration cap from 0 gets nearer
+    # its minimum (scratch: deviances up to 230 lower on a line's far side)
+    best, coef, width = None, None, None
+    for c, w in coarse:
+        coef, dev = pooled.fit(c, w, coef if w == width else None)
+        width = w
+        if best is None or dev < best:  # the first of equal minima, as min() keeps
+            best, c1, w1 = dev, c, w
     near = np.abs(freqs - c1) <= FINE_BAND * w1  # the line and its shoulders
     if near.sum() >= 8:
         freqs, power = freqs[near], power[near]

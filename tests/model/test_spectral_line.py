@@ -111,9 +111,9 @@ def test_a_long_band_is_searched_on_pools_and_still_covers_the_centre(monkeypatc
     rows: list[int] = []
     fit = ieee952.fit_nonneg_gamma
 
-    def spy(design, *args):
+    def spy(design, *args, **kwargs):
         rows.append(len(design))
-        return fit(design, *args)
+        return fit(design, *args, **kwargs)
 
     monkeypatch.setattr(ieee952, "fit_nonneg_gamma", spy)
     covered = 0
@@ -127,6 +127,24 @@ def test_a_long_band_is_searched_on_pools_and_still_covers_the_centre(monkeypatc
         assert c.ordinates > spectral_line.COARSE_ORDINATES  # the fine fit read them pooled
     assert covered >= 3
     assert max(rows) <= spectral_line.COARSE_ORDINATES  # never a fit of the 20,000 ordinates
+
+
+def test_the_coarse_search_begun_from_each_neighbours_fit_finds_what_fits_from_zero_find(
+    monkeypatch,
+):
+    """The coarse search begins each centre's fit from the previous centre's coefficients at
+    the same width: the line found is the one every fit begun from 0 finds, bit for bit."""
+    warm = [
+        spectral_line.line_centre(f, p, f[np.argmax(p)], np.geomspace(f[1] - f[0], 10.0, 14))
+        for f, p, _ in map(long_band, range(2))
+    ]
+    fit = spectral_line._Pooled.fit
+    monkeypatch.setattr(
+        spectral_line._Pooled, "fit", lambda self, f0, w, start=None: fit(self, f0, w)
+    )
+    for (f, p, _), found in zip(map(long_band, range(2)), warm, strict=True):
+        cold = spectral_line.line_centre(f, p, f[np.argmax(p)], np.geomspace(f[1] - f[0], 10.0, 14))
+        assert found.as_evidence() == cold.as_evidence()
 
 
 def test_the_interval_edges_are_where_the_profile_deviance_rises_by_chi2(monkeypatch):
