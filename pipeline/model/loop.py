@@ -220,6 +220,11 @@ class LoopResult:
     time_error_after: float = float("nan")
     """:func:`time_domain_fit`'s error of the baseline on the series and of the final model on the
     corrected series."""
+    error_before_final_range: float | None = None
+    """The baseline's error refitted on the final model's τ range, where a modelled short-τ
+    line widened it (``None`` where the range did not change): the error before on the same τ
+    as the error after (``before.error`` is the baseline's on its own, narrower range, where
+    it may be the smaller of the two although the line explained what it left out)."""
 
     def up_to(self, n_tau: int) -> LoopResult:
         """This result on its first ``n_tau`` τ (the published curve: the loop fits up to T/2,
@@ -268,6 +273,7 @@ class LoopResult:
             "fit_tau_range_s_after": list(self.after.tau_range),
             "time_domain_error_before": self.time_error_before,
             "time_domain_error_after": self.time_error_after,
+            "error_before_final_range": self.error_before_final_range,
         }
 
 
@@ -943,7 +949,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
     """Run the closed loop of issue 4 on one axis (see module doc)."""
     ax = _Axis(signals, curve)
     tau, edf = ax.tau, ax.edf
-    state = _State(ax.avar, ax.y_d.copy(), None)
+    state = baseline = _State(ax.avar, ax.y_d.copy(), None)
     fit0 = state.fit(ax)
     good0 = goodness(fit0, tau, state.avar, edf)
     terms0 = state.terms(ax)
@@ -973,6 +979,10 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         fit, good = new_fit, new_good
     terms1 = terms0 if fit is fit0 else state.terms(ax)
     time_before = ax.time_fit(fit0, {}, ax.y_d).error
+    widened = None
+    if good.tau_range != good0.tau_range:
+        refit = baseline.fit(ax)  # ax.tau_min is the final range's now
+        widened = refit.deviance / refit.dof
     return LoopResult(
         name=signals.name,
         tau_s=tau,
@@ -986,6 +996,7 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         after=good,
         accepted=accepted,
         rejected=list(rejected.values()),
+        error_before_final_range=widened,
         time_error_before=time_before,
         time_error_after=(
             time_before

@@ -123,10 +123,15 @@ def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
             "–".join(_fmt(t) for t in model[f"fit_tau_range_s_{when}"])
             for when in ("before", "after")
         ]
+        error = _before_after(model, "error")
+        if model.get("error_before_final_range") is not None:  # the range widened: same τ too
+            before, after = error.split(" → ")
+            same = _fmt(model["error_before_final_range"])
+            error = f"{before} ({same} on the final τ) → {after}"
         rows.append(
             (
                 axis.name,
-                _before_after(model, "error"),
+                error,
                 _before_after(model, "p_value"),
                 _before_after(model, "rms_z"),
                 f"{_before_after(model, 'max_abs_z')} (τ {tau_max} s)",
@@ -140,7 +145,8 @@ def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
 
 _LOOP_HEADER = ("axis", "error", "p-value", "rms z", "max |z|", "fitted τ [s]", "dof", "effects")
 """The loop's statistics read the fitted τ, which reach T/2 (allan.parquet and the figures stop
-at T/4): the fitted range is shown beside them."""
+at T/4): the fitted range is shown beside them.  Where a modelled short-τ line widened it, the
+error cell also gives the baseline's error on the final range (``error_before_final_range``)."""
 
 
 def _text_table(header: tuple[str, ...], rows: Iterable[tuple[str, ...]]) -> str:
@@ -295,6 +301,13 @@ def report_markdown(
     loop_rows = _loop_rows(result)
     if loop_rows:
         md += ["## Closed loop: model error before and after", "", f"Error: {ERROR_MEASURE}.", ""]
+        if any(axis.loop and axis.loop.error_before_final_range for axis in result.axes.values()):
+            md += [
+                "Where a modelled short-τ line widened the fitted τ range, the error before is "
+                "given on both ranges: the baseline's own, and (in parentheses) the final one, "
+                "where it compares with the error after.",
+                "",
+            ]
         md += [_md_table(_LOOP_HEADER, loop_rows), ""]
         md += _loop_details(result)
     md += ["## Figures", ""]

@@ -44,6 +44,15 @@ def test_line_below_the_fit_start_is_modelled_and_the_range_grows_to_tau0():
     line_note = f"{found.params['frequency_hz']:.4g} Hz narrowband line below the baseline's fit"
     assert line_note in res.terms_after.fit_note
     assert res.after.p_value > 0.01
+    # the error before on both ranges: the baseline's own, and the final one refitted, which is
+    # the line's own "before" (its round's baseline on the wider range) and the one report.json
+    # and report.md compare with the error after
+    assert res.before.tau_range[0] == 0.16 and res.after.tau_range[0] == 0.01
+    assert res.error_before_final_range == found.error_before
+    assert res.error_before_final_range > 100 * res.after.error  # 233 against 1.11
+    model = res.as_model_dict()
+    assert model["error_before_final_range"] == found.error_before
+    assert model["error_before"] == res.before.error
 
 
 def test_prefiltered_white_noise_gets_no_line_below_its_fit_start():
@@ -54,3 +63,5 @@ def test_prefiltered_white_noise_gets_no_line_below_its_fit_start():
     assert res.terms_before.fit_tau_min_s == 0.04
     assert res.accepted == []
     assert res.terms_after.fit_tau_min_s == 0.04
+    assert res.error_before_final_range is None  # the range did not change
+    assert res.as_model_dict()["error_before_final_range"] is None

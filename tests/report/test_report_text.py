@@ -9,6 +9,7 @@ The result is built by hand (SI values chosen here), like tests/test_report.py's
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -247,6 +248,22 @@ def test_loop_before_after_rounded_in_order(md: str) -> None:
         f"| random_walk | {_interval(n_before, MG)} | {_interval(ACCEL_N, MG)} | mg/√s |"
     ) in details
     assert f"| rate_random_walk | ≤ {fmt(ACCEL_K_BOUND * MG)} |" in details
+
+
+def test_a_widened_range_gives_the_error_before_on_both_ranges(md: str) -> None:
+    """Where a short-τ line widened the fitted range, the error cell also gives the baseline's
+    error refitted on the final range (the one comparable with the error after), and a sentence
+    says so; without it, neither."""
+    assert "on the final τ" not in md and "widened the fitted τ range" not in md
+    r = result()
+    loop = replace(r.axes["accel_x"].loop, error_before_final_range=52.3456)
+    r = replace(r, axes={**r.axes, "accel_x": replace(r.axes["accel_x"], loop=loop)})
+    wide = report_markdown(r, {})
+    row = next(ln for ln in wide.splitlines() if ln.startswith("| accel_x | "))
+    assert row.split("|")[2].strip() == "4.235 (52.35 on the final τ) → 1.035"
+    assert "a modelled short-τ line widened the fitted τ range, the error before" in wide
+    line = next(ln for ln in format_table(r).splitlines() if ln.startswith("accel_x "))
+    assert "4.235 (52.35 on the final τ) → 1.035" in line
 
 
 def test_terminal_table_matches_the_report() -> None:
