@@ -65,3 +65,14 @@ def test_prefiltered_white_noise_gets_no_line_below_its_fit_start():
     assert res.terms_after.fit_tau_min_s == 0.04
     assert res.error_before_final_range is None  # the range did not change
     assert res.as_model_dict()["error_before_final_range"] is None
+
+
+def test_an_effect_that_leaves_the_range_as_it_was_gives_no_second_error_before():
+    """A 0.5 Hz sinusoid is modelled inside the baseline's range: the error before is on the
+    final range already, and ``error_before_final_range`` stays null."""
+    rng = np.random.default_rng(2)
+    t = np.arange(N) * TAU0
+    res = run(SIGMA * rng.standard_normal(N) + 0.5 * SIGMA * np.sin(2 * np.pi * 0.5 * t))
+    assert [e.kind for e in res.accepted] == ["sinusoid"]
+    assert res.before.tau_range == res.after.tau_range == (0.01, 316.23)
+    assert res.error_before_final_range is None
