@@ -74,6 +74,20 @@ SPECTRA_KEPT = 32  # per axis (:meth:`_Axis.spectral`: spread-line fits, periodo
 WELCH_KEPT = 8  # per axis (:meth:`_Axis.welch`: Welch spectra by segment length)
 HANN_KEPT = 2  # per axis (:meth:`_Axis.hann`: the full-rate series' and the block means')
 N_BOOT = 200
+EFFECT_KINDS = (
+    "temperature",
+    "supply",
+    "sinusoid",
+    "narrowband",
+    "gauss_markov",
+    "prefilter",
+    "bias_step",
+    "ramp",
+    "rate_ramp",
+    "spike",
+)
+"""Every kind of effect the loop can add (report.json ``effects[].kind``, the schema's enum;
+a warm-up drift is a ``rate_ramp``): :class:`AcceptedEffect` refuses any other."""
 AVAR_ONLY = frozenset({"sinusoid", "narrowband", "prefilter"})
 """AVAR terms whose acceptance the time-domain error does not judge (reported only).  The
 prefilter is outside its model; lines are in it since session 7 (a sinusoid projected out of
@@ -186,6 +200,10 @@ class AcceptedEffect:
     evidence: dict
     error_before: float
     error_after: float
+
+    def __post_init__(self) -> None:
+        if self.kind not in EFFECT_KINDS:  # report.json's schema names every kind
+            raise ValueError(f"effect kind {self.kind!r} is not one of EFFECT_KINDS")
 
 
 @dataclass(frozen=True)

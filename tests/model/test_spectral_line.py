@@ -4,6 +4,8 @@ bin's tone interval (effects.psd_line) does not."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from scipy import integrate, signal
@@ -166,7 +168,7 @@ def test_the_coarse_search_begins_each_centre_from_the_previous_centres_coeffici
     widths = np.geomspace(f[1] - f[0], 10.0, 14)
     spectral_line.line_centre(f, p, f[np.argmax(p)], widths)
     assert len(calls) > 9 * 10 and len({w for w, _, _ in calls}) == 14
-    for (w0, _, coef0), (w1, start1, _) in zip(calls, calls[1:]):
+    for (w0, _, coef0), (w1, start1, _) in itertools.pairwise(calls):
         if w1 == w0:
             assert start1 is coef0
         else:

@@ -10,6 +10,7 @@ import polars as pl
 import pytest
 
 from imupipe.analysis.results import AnalysisResult
+from imupipe.model import loop
 from imupipe.report.report import format_table, kalibr_yaml, write_report
 from imupipe.units import from_si, to_si
 
@@ -52,6 +53,18 @@ def test_report_json_matches_schema_and_contract(written, schema_errors) -> None
     assert (model["tau_max_abs_z_before"], model["tau_max_abs_z_after"]) == (4000.0, 80.0)
     assert accel["effects"][0]["kind"] == "temperature"
     assert "model" not in on_disk["axes"]["accel_y"]
+
+
+def test_the_schema_names_every_effect_kind_the_loop_can_add() -> None:
+    """report.json of a real ADIS16405 unit failed its own schema: "narrowband" (and "ramp",
+    "prefilter") were missing from the effect kinds' enum.  The enum is the loop's list, and
+    the loop's kind sets all lie in it (an AcceptedEffect of another kind is refused)."""
+    enum = json.loads(SCHEMA.read_text())["$defs"]["effect"]["properties"]["kind"]["enum"]
+    assert sorted(enum) == sorted(loop.EFFECT_KINDS)
+    sets = loop.AVAR_ONLY | loop.SLOW_KINDS | loop.COUPLING_KINDS | loop.SPIKE_KINDS
+    assert sets | set(loop.LINE_KINDS) | {"gauss_markov"} == set(loop.EFFECT_KINDS)
+    with pytest.raises(ValueError, match="'warmup' is not one of EFFECT_KINDS"):
+        loop.AcceptedEffect("warmup", {}, {}, {}, 1.0, 0.5)
 
 
 def test_schema_check_catches_broken_reports(written, schema_errors) -> None:
