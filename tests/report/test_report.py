@@ -67,6 +67,39 @@ def test_the_schema_names_every_effect_kind_the_loop_can_add() -> None:
         loop.AcceptedEffect("warmup", {}, {}, {}, 1.0, 0.5)
 
 
+def test_a_vibrating_units_report_json_validates(tmp_path: Path, schema_errors) -> None:
+    """What real ADIS16405 units give, end to end: a bag (the mcap library's writer) whose
+    accel_x carries a 10 Hz spread line below the baseline's fit start, analysed by
+    imupipe.analyze: a narrowband effect, the fitted range widened, and report.json valid."""
+    from scipy import signal
+
+    from imupipe.api import analyze
+    from imupipe.testing.busy_bag import Stream, write_bag
+    from imupipe.testing.ros_cdr import imu_payloads
+
+    n, tau0, sigma = 2**18, 0.01, 0.03
+    rng = np.random.default_rng(1)
+    r = np.exp(-np.pi * 0.5 * tau0)  # a damped oscillator: 10 Hz, 0.5 Hz wide
+    line = signal.lfilter(
+        [1.0], [1, -2 * r * np.cos(2 * np.pi * 10.0 * tau0), r * r], rng.standard_normal(n)
+    )
+    accel = sigma * rng.standard_normal((n, 3)) + [0.0, 0.0, 9.81]
+    accel[:, 0] += 0.3 * sigma * line / line.std()
+    gyro = 1e-3 * rng.standard_normal((n, 3))
+    stamps = 10**18 + np.arange(n, dtype=np.int64) * 10_000_000
+    payloads = [row.tobytes() for row in imu_payloads(stamps, gyro, accel)]
+    bag = tmp_path / "vibrating.mcap"
+    write_bag(bag, [Stream("/imu/data", "sensor_msgs/msg/Imu", payloads, stamps)])
+    result = analyze(bag, tmp_path / "out", rrd=False)
+    assert [e.kind for e in result.axes["accel_x"].loop.accepted] == ["narrowband"]
+    doc = json.loads((tmp_path / "out" / "report.json").read_text())
+    schema = json.loads(SCHEMA.read_text())
+    assert schema_errors(doc, schema, schema) == []
+    model = doc["axes"]["accel_x"]["model"]
+    assert model["fit_tau_range_s_after"][0] == 0.01 < model["fit_tau_range_s_before"][0]
+    assert model["error_before_final_range"] > 50 * model["error_after"]  # 122 against 1.31
+
+
 def test_schema_check_catches_broken_reports(written, schema_errors) -> None:
     _, doc, _ = written
     schema = json.loads(SCHEMA.read_text())
