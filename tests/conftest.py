@@ -113,7 +113,7 @@ def small_recordings() -> SmallRecordings:
 
 def _schema_errors(doc: object, schema: dict, root: dict, where: str = "$") -> list[str]:
     """Required keys, types, const/enum, items and additionalProperties of a JSON Schema subset
-    (enough for report.schema.json; jsonschema is not a dependency)."""
+    (enough for report.schema.json and fleet.schema.json; jsonschema is not a dependency)."""
     if "$ref" in schema:
         schema = root["$defs"][schema["$ref"].rsplit("/", 1)[-1]]
     types = {
@@ -122,12 +122,16 @@ def _schema_errors(doc: object, schema: dict, root: dict, where: str = "$") -> l
         "string": str,
         "number": (int, float),
         "integer": int,
+        "boolean": bool,
         "null": type(None),
     }
     errors = []
     if "type" in schema:
         allowed = schema["type"] if isinstance(schema["type"], list) else [schema["type"]]
-        ok = any(isinstance(doc, types[t]) and not isinstance(doc, bool) for t in allowed)
+        ok = any(  # a bool is an int to Python, not a number to JSON
+            isinstance(doc, types[t]) and (t == "boolean" or not isinstance(doc, bool))
+            for t in allowed
+        )
         if not ok:
             return [f"{where}: {type(doc).__name__} is not {allowed}"]
     if "const" in schema and doc != schema["const"]:

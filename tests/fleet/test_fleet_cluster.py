@@ -26,6 +26,9 @@ from imupipe.report.rerun_view import rerun_executable
 
 BIN = Path(sys.executable).parent
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "adis16364_default_5min.mcap"
+FLEET_SCHEMA = json.loads(
+    (Path(__file__).resolve().parents[2] / "schemas" / "fleet.schema.json").read_text()
+)
 
 
 def _record(path: Path, seed: int) -> Path:
@@ -59,7 +62,7 @@ def s3_server(monkeypatch):
         server.stop()
 
 
-def test_local_cluster_local_and_s3_units(tmp_path, s3_server):
+def test_local_cluster_local_and_s3_units(tmp_path, s3_server, schema_errors):
     import boto3
 
     local = _record(tmp_path / "unit_a.mcap", seed=1)
@@ -103,6 +106,7 @@ def test_local_cluster_local_and_s3_units(tmp_path, s3_server):
 
     # fleet.json: the population median of N is the median of the units' final N
     doc = json.loads((out / "fleet.json").read_text())
+    assert schema_errors(doc, FLEET_SCHEMA, FLEET_SCHEMA) == []
     assert (doc["recordings"], doc["analysed"], doc["failed"]) == (2, 2, 0)
     row = next(p for p in doc["population"] if p["axis"] == "gyro_x" and p["term"] == "random_walk")
     values = [
@@ -138,7 +142,7 @@ def _wait_for(predicate, timeout_s: float, what: str):
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def test_existing_scheduler_survives_a_killed_worker(tmp_path):
+def test_existing_scheduler_survives_a_killed_worker(tmp_path, schema_errors):
     from distributed import Client
 
     good = [_record(tmp_path / f"unit{k}.mcap", seed=10 + k) for k in range(4)]
@@ -221,6 +225,7 @@ def test_existing_scheduler_survives_a_killed_worker(tmp_path):
         f"imupipe: error: 2 of 6 recordings failed (listed in {tmp_path / 'out'}/fleet.md)",
     ]
     doc = json.loads((tmp_path / "out" / "fleet.json").read_text())
+    assert schema_errors(doc, FLEET_SCHEMA, FLEET_SCHEMA) == []  # failed units included
     units = {u["name"]: u for u in doc["units"]}
     assert [units[f"unit{k}"]["status"] for k in range(4)] == ["ok"] * 4
     # the killed worker's task ran again on the surviving worker: it did every good unit but

@@ -4,7 +4,9 @@ the Markdown escaping of untrusted names."""
 from __future__ import annotations
 
 import itertools
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import polars as pl
@@ -32,6 +34,8 @@ from imupipe.fleet.report import md_text
 from imupipe.fleet.task import budget_for_worker
 from imupipe.report.datasheet import Spec, load_datasheet
 from imupipe.units import RAD_PER_DEG
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize(("n", "table"), [(5, 5.079), (10, 3.379), (20, 2.752)])
@@ -287,6 +291,38 @@ def test_the_median_range_reaches_fleet_json_and_fleet_md():
     assert rows[1] == (f"{2e-3 * deg:.4g} – {3e-3 * deg:.4g}", "—")
     assert rows[2][0] == f"{4e-3 * deg:.4g}" and rows[2][1] != "—"
     assert rows[3] == (f"{2e-3 * deg:.4g}", "—")  # exact, but no spread with a bound
+
+
+def test_fleet_json_with_a_datasheet_and_a_failed_unit_matches_its_schema(tmp_path, schema_errors):
+    """fleet.json as the schema (schemas/fleet.schema.json) declares it, with every branch a
+    population can take: a datasheet verdict, a tolerance interval, terms only bounded, a failed
+    unit; and what the schema's subset check finds wrong in a broken copy."""
+    from imupipe.fleet.report import fleet_json
+    from imupipe.fleet.task import UnitOutcome
+
+    schema = json.loads((ROOT / "schemas" / "fleet.schema.json").read_text())
+    sheet = _sheet(tmp_path, 'part = "A"\n[gyro]\nrandom_walk = { value = 2.0, unit = "°/√h" }\n')
+    spec = sheet.get("gyro", "random_walk")
+    lot = _units([0.5 * spec.si(), 0.6 * spec.si(), 0.7 * spec.si()])
+    stats = [
+        term_stats("gyro_x", "random_walk", "rad/s/sqrt(Hz)", lot, spec),
+        term_stats("gyro_x", "rate_ramp", "rad/s^2", [UnitTerm("b", None, None, 1e-7)]),
+    ]
+    failed = UnitOutcome("bad", "bad.mcap", "failed", "not MCAP", None, None, 0.1, "h:1")
+    curve = {"tau": [1.0], "median": [1e-3], "lo": [float("nan")], "hi": [2e-3], "units": [3]}
+    pop = pl.DataFrame({"axis": ["gyro_x"], "unit": ["rad/s"], **curve})
+    doc = json.loads(json.dumps(fleet_json([failed], stats, pop, sheet)))
+    assert schema_errors(doc, schema, schema) == []
+    assert doc["population"][0]["datasheet"]["population_pass"] is True
+    assert doc["population_adev"]["gyro_x"]["lo"] == [None]  # NaN written as null
+    doc["units"][0]["status"] = "skipped"
+    doc["population"][0]["datasheet"]["population_pass"] = "yes"
+    doc["population_adev"]["gyro_q"] = doc["population_adev"]["gyro_x"]
+    assert schema_errors(doc, schema, schema) == [
+        "$.units[0].status: 'skipped' not in ['ok', 'failed']",
+        "$.population[0].datasheet.population_pass: str is not ['boolean', 'null']",
+        "$.population_adev: key gyro_q not allowed",
+    ]
 
 
 def test_population_verdicts_at_their_boundaries(tmp_path):

@@ -59,8 +59,9 @@ def test_the_schema_names_every_effect_kind_the_loop_can_add() -> None:
     """report.json of a real ADIS16405 unit failed its own schema: "narrowband" (and "ramp",
     "prefilter") were missing from the effect kinds' enum.  The enum is the loop's list, and
     the loop's kind sets all lie in it (an AcceptedEffect of another kind is refused)."""
-    enum = json.loads(SCHEMA.read_text())["$defs"]["effect"]["properties"]["kind"]["enum"]
-    assert sorted(enum) == sorted(loop.EFFECT_KINDS)
+    for schema in (SCHEMA, SCHEMA.with_name("fleet.schema.json")):  # fleet.json copies them
+        enum = json.loads(schema.read_text())["$defs"]["effect"]["properties"]["kind"]["enum"]
+        assert sorted(enum) == sorted(loop.EFFECT_KINDS), schema.name
     sets = loop.AVAR_ONLY | loop.SLOW_KINDS | loop.COUPLING_KINDS | loop.SPIKE_KINDS
     assert sets | set(loop.LINE_KINDS) | {"gauss_markov"} == set(loop.EFFECT_KINDS)
     with pytest.raises(ValueError, match="'warmup' is not one of EFFECT_KINDS"):
