@@ -26,7 +26,13 @@ import typer
 from imupipe import stopping
 from imupipe.errors import ImupipeError
 from imupipe.escape import printable
-from imupipe.report.exports import FORMATS, ExportOptions, check_options, write_exports
+from imupipe.report.exports import (
+    FORMATS,
+    ExportOptions,
+    Written,
+    check_options,
+    write_exports,
+)
 
 app = typer.Typer(
     add_completion=False,
@@ -378,9 +384,9 @@ class _ExportRequest:
         """Reject bad options before the analysis runs."""
         check_options(self.options)
 
-    def write(self, result, out_dir: Path) -> list[Path]:
+    def write(self, result, out_dir: Path) -> Written:
         if not self.formats:
-            return []
+            return Written([], [])
         return write_exports(result.to_dict(), self.formats, out_dir, self.options)
 
 
@@ -394,12 +400,12 @@ def _analyze_one(
 
     result = run_analyze(path, out_dir, progress=not quiet, **asdict(options))
     written = exporting.write(result, out_dir)
-    for w in result.input.warnings:
+    for w in [*result.input.warnings, *written.skipped]:
         _warn(w)
     if not quiet:
         sheet = load_datasheet(options.datasheet) if options.datasheet else None
         _say(format_table(result, sheet))
-        for p in written:
+        for p in written.paths:
             _say(printable(f"export: {p}"))
         _say(printable(f"reports written to {out_dir}/"))
 
@@ -423,7 +429,10 @@ def export_cmd(
     from imupipe.report.exports import export_result_dir
 
     options = ExportOptions(combine.value, inflate, rate)
-    for path in export_result_dir(result_dir, [f.value for f in format], out, options):
+    written = export_result_dir(result_dir, [f.value for f in format], out, options)
+    for line in written.skipped:
+        _warn(line)
+    for path in written.paths:
         typer.echo(f"{path}")
 
 

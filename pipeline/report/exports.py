@@ -91,6 +91,16 @@ class NoiseModel:
         """The ``inflate``d value of every axis of ``sensor`` (SI)."""
         return [getattr(a, term) * self.options.inflate for a in self.sensors[sensor]]
 
+    def three_axes(self, sensor: Sensor, term: Literal["density", "random_walk"]) -> list[float]:
+        """:meth:`per_axis` for a format that holds x, y and z of a sensor: an
+        :class:`ExportError` naming the axes the unit provides when they are fewer."""
+        axes = [a.axis for a in self.sensors[sensor]]
+        if len(axes) != 3:
+            raise ExportError(
+                f"it needs all three axes of a sensor; the {sensor}'s are {', '.join(axes)} only"
+            )
+        return self.per_axis(sensor, term)
+
     def combined(self, sensor: Sensor, term: Literal["density", "random_walk"]) -> float:
         """One value for the sensor: the largest axis (``worst``) or the root mean square
         (``mean``: the density whose square is the mean PSD of the axes)."""
@@ -343,22 +353,15 @@ def basalt(m: NoiseModel) -> str:
     for sensor in SENSORS:
         if sensor in m.sensors:
             noise, bias = keys[sensor]
-            value0[noise] = _three(m.per_axis(sensor, "density"))
-            value0[bias] = _three(m.per_axis(sensor, "random_walk"))
+            value0[noise] = m.three_axes(sensor, "density")
+            value0[bias] = m.three_axes(sensor, "random_walk")
     doc = {"value0": value0, "imupipe": m.header("Basalt", cite)}
     return json.dumps(doc, indent=2, allow_nan=False) + "\n"
 
 
-def _three(values: list[float]) -> list[float]:
-    if len(values) != 3:
-        raise ExportError(f"this format needs all three axes of a sensor; found {len(values)}")
-    return values
-
-
 def _diagonal(values: list[float]) -> list[list[float]]:
     """3 × 3 matrix with ``values`` on the diagonal (x, y, z)."""
-    v = _three(values)
-    return [[v[i] if i == j else 0.0 for j in range(3)] for i in range(3)]
+    return [[values[i] if i == j else 0.0 for j in range(3)] for i in range(3)]
 
 
 def gtsam(m: NoiseModel) -> str:
@@ -383,8 +386,8 @@ def gtsam(m: NoiseModel) -> str:
     for sensor in ("gyro", "accel"):
         if sensor in m.sensors:
             white, bias = keys[sensor]
-            body[white] = _diagonal([v * v for v in m.per_axis(sensor, "density")])
-            body[bias] = _diagonal([v * v for v in m.per_axis(sensor, "random_walk")])
+            body[white] = _diagonal([v * v for v in m.three_axes(sensor, "density")])
+            body[bias] = _diagonal([v * v for v in m.three_axes(sensor, "random_walk")])
     return _yaml(body, m.header("GTSAM", cite))
 
 
@@ -401,7 +404,7 @@ def ros(m: NoiseModel) -> str:
     names = {"gyro": "angular_velocity_covariance", "accel": "linear_acceleration_covariance"}
     for sensor in ("gyro", "accel"):
         if sensor in m.sensors:
-            variances = [v * v * m.rate_hz for v in m.per_axis(sensor, "density")]
+            variances = [v * v * m.rate_hz for v in m.three_axes(sensor, "density")]
             body[names[sensor]] = [x for row in _diagonal(variances) for x in row]
     return _yaml(body, m.header("sensor_msgs/Imu", cite))
 
@@ -426,18 +429,41 @@ def render(doc: dict, fmt: str, options: ExportOptions = ExportOptions()) -> tup
     return name, write(noise_model(doc, options))
 
 
+@dataclass(frozen=True)
+class Written:
+    """The files :func:`write_exports` wrote, and one sentence per format it left out."""
+
+    paths: list[Path]
+    skipped: list[str]
+
+
 def write_exports(
     doc: dict, formats: list[str], out_dir: Path, options: ExportOptions = ExportOptions()
-) -> list[Path]:
-    """Write each export of ``formats`` (``all``: every one) into ``out_dir``."""
-    chosen = list(FORMATS) if "all" in formats else formats
-    rendered = [render(doc, f, options) for f in chosen]  # every check before any write
+) -> Written:
+    """Write each export of ``formats`` (``all``: every one) into ``out_dir``, every check
+    before any write.  A format that cannot hold the model (Basalt's, GTSAM's and the ROS
+    covariances' three values per sensor, for a unit that provides fewer axes) is an
+    :class:`ExportError` naming it when it was asked for by name; under ``all`` it is left
+    out and said in :attr:`Written.skipped` (a gyro-only unit still gets its Kalibr file)."""
+    unknown = [f for f in formats if f != "all" and f not in FORMATS]
+    if unknown:
+        raise ExportError(f"unknown export format {unknown[0]!r}; known: {', '.join(FORMATS)}")
+    noise_model(doc, options)  # what no format can write: said once, not once per format
+    everything = "all" in formats
+    rendered, skipped = [], []
+    for fmt in list(FORMATS) if everything else formats:
+        try:
+            rendered.append(render(doc, fmt, options))
+        except ExportError as exc:
+            if not everything:
+                raise ExportError(f"{fmt}: {exc}") from None
+            skipped.append(f"export {fmt} not written: {exc}")
     paths = []
     for name, text in rendered:
         path = Path(out_dir) / name
         path.write_text(text)
         paths.append(path)
-    return paths
+    return Written(paths, skipped)
 
 
 def export_result_dir(
@@ -445,7 +471,7 @@ def export_result_dir(
     formats: list[str],
     out_dir: Path | None = None,
     options: ExportOptions = ExportOptions(),
-) -> list[Path]:
+) -> Written:
     """``imupipe export``: the exports of an analysis folder's report.json, written into
     ``out_dir`` (default: that folder)."""
     doc = read_report(result_dir)

@@ -74,7 +74,7 @@ def parse_opencv_yaml(path: Path) -> dict:
 
 @pytest.fixture
 def written(tmp_path: Path) -> dict[str, Path]:
-    paths = write_exports(report_doc(), ["all"], tmp_path)
+    paths = write_exports(report_doc(), ["all"], tmp_path).paths
     return {p.name: p for p in paths}
 
 
@@ -222,3 +222,33 @@ def test_cli_export_writes_from_report_json(tmp_path: Path) -> None:
     doc = parse_opencv_yaml(tmp_path / "orbslam3_imu.yaml")
     assert doc["IMU.NoiseGyro"] == pytest.approx(2 * 1.3e-4, rel=1e-12)
     assert (tmp_path / "basalt_imu.json").is_file() and not (tmp_path / "imu.yaml").exists()
+
+
+def test_cli_export_all_of_a_gyro_only_unit_writes_what_it_can_and_warns(tmp_path: Path) -> None:
+    doc = report_doc()
+    doc["axes"] = {"gyro_x": doc["axes"]["gyro_x"]}  # a single-axis gyro, as the real MTi-G
+    (tmp_path / "report.json").write_text(json.dumps(doc))
+    run = subprocess.run(
+        [sys.executable, "-m", "imupipe", "export", str(tmp_path), "-f", "all"],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stderr.splitlines() == [
+        f"warning: export {fmt} not written: it needs all three axes of a sensor; the gyro's "
+        "are gyro_x only"
+        for fmt in ("basalt", "gtsam", "ros")
+    ]
+    assert run.stdout.splitlines() == [
+        str(tmp_path / name)
+        for name in ("imu.yaml", "kalibr_imu_chain.yaml", "vins_imu.yaml", "orbslam3_imu.yaml")
+    ]
+    asked = subprocess.run(
+        [sys.executable, "-m", "imupipe", "export", str(tmp_path), "-f", "ros"],
+        capture_output=True,
+        text=True,
+    )
+    assert asked.returncode == 2
+    assert asked.stderr.splitlines() == [
+        "imupipe: error: ros: it needs all three axes of a sensor; the gyro's are gyro_x only"
+    ]

@@ -124,7 +124,9 @@ def test_per_axis_formats_need_all_three_axes() -> None:
     doc = report_doc(("gyro_x", "gyro_z", "accel_x", "accel_y", "accel_z"))
     assert _kalibr(doc)["gyroscope_noise_density"] == 2e-4
     for fmt in ("basalt", "gtsam", "ros"):
-        with pytest.raises(ExportError, match="needs all three axes of a sensor; found 2"):
+        with pytest.raises(
+            ExportError, match="three axes of a sensor; the gyro's are gyro_x, gyro_z only"
+        ):
             render(doc, fmt)
 
 
@@ -172,17 +174,37 @@ def test_reports_without_axes_or_terms() -> None:
 
 def test_one_bad_format_writes_nothing(tmp_path: Path) -> None:
     doc = report_doc(("gyro_x", "gyro_y"))  # kalibr can, gtsam cannot
-    with pytest.raises(ExportError, match="needs all three axes"):
+    with pytest.raises(ExportError, match=r"^gtsam: it needs all three axes"):
         write_exports(doc, ["kalibr", "gtsam"], tmp_path)
     assert list(tmp_path.iterdir()) == []
 
 
+def test_all_writes_what_a_unit_with_fewer_axes_allows_and_says_what_it_left_out(
+    tmp_path: Path,
+) -> None:
+    """A gyro-only unit (a single-axis gyro, as the real MTi-G): ``all`` writes the formats
+    that take one value per sensor and names each one it left out; a format asked for by name
+    that cannot hold it is an error naming it; nothing to export at all is one error."""
+    written = write_exports(report_doc(("gyro_x",)), ["all"], tmp_path)
+    assert [p.name for p in written.paths] == [
+        "imu.yaml", "kalibr_imu_chain.yaml", "vins_imu.yaml", "orbslam3_imu.yaml"
+    ]  # fmt: skip
+    assert written.skipped == [
+        f"export {fmt} not written: it needs all three axes of a sensor; the gyro's are gyro_x only"
+        for fmt in ("basalt", "gtsam", "ros")
+    ]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in written.paths)
+    assert write_exports(report_doc(), ["all"], tmp_path).skipped == []
+    with pytest.raises(ExportError, match=r"^report\.json holds no gyro or accelerometer axis"):
+        write_exports({"input": {"rate_hz": 100.0}, "axes": {}}, ["all"], tmp_path)
+
+
 def test_export_result_dir(tmp_path: Path) -> None:
     (tmp_path / "report.json").write_text(json.dumps(report_doc()))
-    written = export_result_dir(tmp_path, ["vins", "ros"])
+    written = export_result_dir(tmp_path, ["vins", "ros"]).paths
     assert [p.name for p in written] == ["vins_imu.yaml", "imu_covariance.yaml"]
     assert all(p.parent == tmp_path for p in written)
-    other = export_result_dir(tmp_path, ["all"], tmp_path / "new" / "dir")
+    other = export_result_dir(tmp_path, ["all"], tmp_path / "new" / "dir").paths
     assert len(other) == 7 and (tmp_path / "new" / "dir" / "basalt_imu.json").is_file()
     (tmp_path / "bad").mkdir()
     (tmp_path / "bad" / "report.json").write_text("{not json")
