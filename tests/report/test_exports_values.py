@@ -179,6 +179,14 @@ def test_one_bad_format_writes_nothing(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+def test_an_unknown_format_is_named_first_and_nothing_is_written(tmp_path: Path) -> None:
+    with pytest.raises(ExportError, match=r"^unknown export format 'bogus'; known: kalibr, "):
+        write_exports(report_doc(), ["kalibr", "bogus", "ghost", "all"], tmp_path)
+    with pytest.raises(ExportError, match=r"^unknown export format 'zzz'"):
+        write_exports(report_doc(), ["zzz"], tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_all_writes_what_a_unit_with_fewer_axes_allows_and_says_what_it_left_out(
     tmp_path: Path,
 ) -> None:
