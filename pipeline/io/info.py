@@ -34,6 +34,20 @@ class TopicInfo:
         return (self.end_ns - self.start_ns) / 1e9
 
 
+METADATA_SHOWN = 80
+"""Characters of a metadata value that ``imupipe info`` shows; a longer or multi-line one (the
+``serialized_metadata`` of every rosbag2 bag: its whole metadata.yaml, ~1 KB) shows its first
+line, cut there, and its length."""
+
+
+def shown(value: str) -> str:
+    """A metadata value as ``imupipe info`` shows it on one line (:data:`METADATA_SHOWN`)."""
+    if len(value) <= METADATA_SHOWN and "\n" not in value:
+        return value
+    first = value.split("\n", 1)[0][:METADATA_SHOWN]
+    return f"{first} … ({len(value)} characters)"
+
+
 @dataclass
 class RecordingInfo:
     path: Path
@@ -56,7 +70,9 @@ class RecordingInfo:
                 f"{t.duration_s:.1f} s, {rate:.2f} Hz"
             )
         for name, meta in self.metadata.items():
-            out.append(f"  metadata {name}: " + ", ".join(f"{k}={v}" for k, v in meta.items()))
+            out.append(
+                f"  metadata {name}: " + ", ".join(f"{k}={shown(v)}" for k, v in meta.items())
+            )
         out.extend(f"  warning: {d}" for d in self.damage)
         return out
 

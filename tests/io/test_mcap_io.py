@@ -282,3 +282,23 @@ def test_a_tiny_memory_budget_still_reads_chunks_up_to_64_mib(tmp_path: Path) ->
     assert rec.frames.height == 3000
     skipped = [w for w in rec.warnings if "skipped unread" in w]
     assert len(skipped) == 1 and f"it declares {limit + 1} bytes uncompressed" in skipped[0]
+
+
+def test_info_shows_a_long_or_multiline_metadata_value_by_its_first_line_and_length() -> None:
+    """rosbag2's serialized_metadata (every ROS 2 bag's metadata.yaml, ~1 KB) is one line of
+    ``imupipe info``, not a kilobyte of escaped YAML; short values are shown whole."""
+    from imupipe.io.info import METADATA_SHOWN, RecordingInfo
+
+    yaml_text = "compression_format: ''\ncompression_mode: ''\n" + "x: 1\n" * 200
+    long_line = "a" * (METADATA_SHOWN + 1)
+    meta = {
+        "rosbag2": {"serialized_metadata": yaml_text},
+        "adis16364": {"serial": "42", "note": long_line, "exact": "b" * METADATA_SHOWN},
+    }
+    lines = RecordingInfo(Path("bag"), 10, 1, [], meta).lines()
+    assert lines[1:] == [
+        f"  metadata rosbag2: serialized_metadata=compression_format: '' … ({len(yaml_text)} "
+        "characters)",
+        f"  metadata adis16364: serial=42, note={'a' * METADATA_SHOWN} … "
+        f"({METADATA_SHOWN + 1} characters), exact={'b' * METADATA_SHOWN}",
+    ]
