@@ -421,12 +421,24 @@ FORMATS: dict[str, tuple[str, Callable[[NoiseModel], str]]] = {
 """format name: (file name, writer)."""
 
 
+def _known(formats: list[str]) -> None:
+    """An :class:`ExportError` naming the first of ``formats`` that is neither ``all`` nor one
+    of :data:`FORMATS`."""
+    unknown = [f for f in formats if f != "all" and f not in FORMATS]
+    if unknown:
+        raise ExportError(f"unknown export format {unknown[0]!r}; known: {', '.join(FORMATS)}")
+
+
+def _rendered(model: NoiseModel, fmt: str) -> tuple[str, str]:
+    """(file name, text) of the export ``fmt`` (one of :data:`FORMATS`) of ``model``."""
+    name, write = FORMATS[fmt]
+    return name, write(model)
+
+
 def render(doc: dict, fmt: str, options: ExportOptions = ExportOptions()) -> tuple[str, str]:
     """(file name, text) of one export of a report.json document."""
-    if fmt not in FORMATS:
-        raise ExportError(f"unknown export format {fmt!r}; known: {', '.join(FORMATS)}")
-    name, write = FORMATS[fmt]
-    return name, write(noise_model(doc, options))
+    _known([fmt])
+    return _rendered(noise_model(doc, options), fmt)
 
 
 @dataclass(frozen=True)
@@ -445,15 +457,13 @@ def write_exports(
     covariances' three values per sensor, for a unit that provides fewer axes) is an
     :class:`ExportError` naming it when it was asked for by name; under ``all`` it is left
     out and said in :attr:`Written.skipped` (a gyro-only unit still gets its Kalibr file)."""
-    unknown = [f for f in formats if f != "all" and f not in FORMATS]
-    if unknown:
-        raise ExportError(f"unknown export format {unknown[0]!r}; known: {', '.join(FORMATS)}")
-    noise_model(doc, options)  # what no format can write: said once, not once per format
+    _known(formats)
+    model = noise_model(doc, options)  # what no format can write: said once, not per format
     everything = "all" in formats
     rendered, skipped = [], []
     for fmt in list(FORMATS) if everything else formats:
         try:
-            rendered.append(render(doc, fmt, options))
+            rendered.append(_rendered(model, fmt))
         except ExportError as exc:
             if not everything:
                 raise ExportError(f"{fmt}: {exc}") from None

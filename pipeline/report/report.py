@@ -124,10 +124,11 @@ def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
             for when in ("before", "after")
         ]
         error = _before_after(model, "error")
-        if model.get("error_before_final_range") is not None:  # the range widened: same τ too
-            before, after = error.split(" → ")
-            same = _fmt(model["error_before_final_range"])
-            error = f"{before} ({same} on the final τ) → {after}"
+        if (same := model.get("error_before_final_range")) is not None:  # the range widened
+            error = (
+                f"{_fmt(model['error_before'])} ({_fmt(same)} on the final τ) → "
+                f"{_fmt(model['error_after'])}"
+            )
         rows.append(
             (
                 axis.name,
