@@ -196,19 +196,30 @@ def line_centre(
         lo, hi = (w_hat * np.exp(_edge(width_excess, 0.0, s, np.log(WIDTH_SPAN))) for s in (-1, 1))
         return float(lo), float(hi)
 
-    c_lo, c_hi = (_edge(excess, c_hat, s * w_hat, CENTRE_SPAN * w_hat) for s in (-1.0, 1.0))
+    c_lo, c_hi = (
+        _edge(excess, c_hat, s * w_hat, CENTRE_SPAN * w_hat, floor=0.0) for s in (-1.0, 1.0)
+    )
     return LineCentre(float(c_hat), c_lo, c_hi, w_hat, phi, int(power.size), width_interval)
 
 
-def _edge(excess, start: float, unit: float, span: float) -> float:
+def _edge(
+    excess: Callable[[float], float], start: float, unit: float, span: float,
+    floor: float = -np.inf,
+) -> float:  # fmt: skip
     """Where ``excess`` (≤ 0 at ``start``) crosses 0 going from ``start`` in the direction and
     scale of ``unit``: steps of 0.05, 0.1, 0.2 … × ``unit`` bracket it, Brent's root finder
-    (to 1e-4 × |unit|) finds it; censored at ``span`` from ``start``."""
+    (to 1e-4 × |unit|) finds it; censored at ``span`` from ``start`` and at ``floor`` (a line's
+    centre is never below 0 Hz: the oscillator's PSD depends on the centre's square, so its
+    profile below 0 mirrors the one above and an edge there is no frequency), the censored
+    edge being that limit itself (a real ADIS16405's broad candidate line at 28.6 Hz read
+    [−40.8, 40.8] Hz before)."""
+    limit = span if unit > 0 else min(span, start - floor)
     inner, step = start, 0.05
     while True:
-        outer = start + step * unit
+        reach = min(step * abs(unit), limit)
+        outer = start + float(np.copysign(reach, unit))
         inside = excess(outer) <= 0  # each call a profile fit: read once
-        if not inside or step * abs(unit) > span:
+        if not inside or reach >= limit:
             break
         inner, step = outer, 2 * step
     if inside:  # censored

@@ -205,3 +205,22 @@ def test_the_interval_edges_are_where_the_profile_deviance_rises_by_chi2(monkeyp
     ]
     assert max(inner) < spectral_line.CHI2_95 - 0.2  # inside the interval: below the limit
     assert c.lo < c.frequency_hz < c.hi
+
+
+@pytest.mark.parametrize(("f0", "seed", "floored"), [(0.05, 1, False), (0.05, 7, True)])
+def test_an_unresolved_centre_is_censored_at_its_span_and_at_0_hz(f0, seed, floored):
+    """White noise alone: the profile over the centre stays flat, so each edge is censored —
+    at :data:`CENTRE_SPAN` widths from the centre exactly (the bracketing's last step overshot
+    it by up to 1.6×), and never below 0 Hz (the PSD depends on the centre's square: a real
+    ADIS16405 report read [−40.8, 40.8] Hz)."""
+    y = np.random.default_rng(seed).standard_normal(N)
+    freqs, power = effects.hann_periodogram(y, TAU0, f0 / 1.6, f0 * 1.6)
+    c = spectral_line.line_centre(freqs, power, f0, np.geomspace(1 / (N * TAU0), f0 / 2, 14))
+    span = spectral_line.CENTRE_SPAN * c.width_hz
+    assert c.hi == pytest.approx(c.frequency_hz + span, rel=1e-12)
+    if floored:
+        assert c.lo == 0.0 < c.frequency_hz - 0.1 * span
+        assert c.frequency_hz < span
+    else:
+        assert c.lo == pytest.approx(c.frequency_hz - span, rel=1e-12)
+        assert c.lo > 0.0
