@@ -393,18 +393,20 @@ class _ExportRequest:
 def _analyze_one(
     path: Path, out_dir: Path, options, quiet: bool, exporting: _ExportRequest
 ) -> None:
-    """Analyse one IMU topic into ``out_dir``; print its warnings and table; write exports."""
+    """Analyse one IMU topic into ``out_dir``; write exports; print its table (stdout) and then
+    its warnings, once (stderr: also with ``quiet``)."""
     from imupipe.api import analyze as run_analyze
     from imupipe.report.datasheet import load_datasheet
     from imupipe.report.report import format_table
 
     result = run_analyze(path, out_dir, progress=not quiet, **asdict(options))
     written = exporting.write(result, out_dir)
-    for w in [*result.input.warnings, *written.skipped]:
-        _warn(w)
     if not quiet:
         sheet = load_datasheet(options.datasheet) if options.datasheet else None
         _say(format_table(result, sheet))
+    for w in [*result.input.warnings, *written.skipped]:  # after the table, where it ends
+        _warn(w)
+    if not quiet:
         for p in written.paths:
             _say(printable(f"export: {p}"))
         _say(printable(f"reports written to {out_dir}/"))

@@ -137,6 +137,28 @@ def test_stuck_channel_saturation_ea_flag_and_counter_wrap(
     assert "warning: " + report["input"]["warnings"][0] in err  # printed too
 
 
+def test_the_command_prints_each_warning_once_after_its_table(
+    tmp_path: Path, capsys, clean: FrameBlock
+) -> None:
+    """Not quiet: the table on stdout, then each warning once on stderr (the table repeated them,
+    so a terminal showed every warning twice)."""
+    burst = clean.burst.copy()
+    burst[:, 2] = (burst[:, 2] & 0xC000) | 0x0005  # gyro_y stuck at 5 LSB
+    path = write_adis(tmp_path / "f.mcap", edit(clean, burst=burst))
+    old = sys.argv
+    sys.argv = ["imupipe", "analyze", str(path), "--out", str(tmp_path / "o"), "--no-rrd"]
+    try:
+        with pytest.raises(SystemExit) as exit_info:
+            main()
+    finally:
+        sys.argv = old
+    out, err = capsys.readouterr()
+    assert exit_info.value.code == 0
+    stuck = "warning: gyro_y is constant over the segment (stuck channel?)"
+    assert err.count(stuck) == 1 and "warning" not in out
+    assert "Random walk N       gyro_x" in out and out.rstrip().endswith("o/")
+
+
 def test_stamps_duplicate_backwards_and_gaps(tmp_path: Path, capsys, clean: FrameBlock) -> None:
     keep = np.delete(np.arange(N), 2000)  # one frame lost: stamp and counter skip
     block = clean[keep]

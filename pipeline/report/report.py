@@ -202,7 +202,9 @@ def window_text(window_s: tuple[float, float | None]) -> str | None:
 
 def format_table(result: AnalysisResult, datasheet: Datasheet | None = None) -> str:
     """The paper-style terminal table printed by ``imupipe analyze``: the final model's terms
-    (``datasheet``: default :func:`default_datasheet`)."""
+    (``datasheet``: default :func:`default_datasheet`) and the loop's table.  The input's
+    warnings are not in it: the command prints them once, on stderr, after it (they were in
+    both, so a terminal showed each twice)."""
     inp = result.input
     head = (
         f"{printable(inp.path)} [{printable(inp.topic)}]: {inp.frames} frames, "
@@ -216,7 +218,6 @@ def format_table(result: AnalysisResult, datasheet: Datasheet | None = None) -> 
     if loop_rows:
         parts.append(f"closed loop (error = {ERROR_MEASURE}):")
         parts.append(_text_table(_LOOP_HEADER, loop_rows))
-    parts += [f"warning: {printable(w)}" for w in inp.warnings]
     return "\n".join(parts)
 
 
