@@ -474,10 +474,7 @@ def compile_kernels(loop: bool = True) -> None:
     psd_line(
         white, 0.01, 10.0, 20.0, spike_candidate(white + 50.0 * (np.arange(4096) == 7), 0.01).spikes
     )
-    robust.median_positive(np.cumsum(white), differences=True)
-    robust.mad(np.cumsum(white), differences=True)
-    robust.median(np.append(white, 1e12))  # one bin of many values: gathered (real records)
-    robust.running_median(white.reshape(-1, 2), 16, 2)  # the event detector's local levels
+    robust.compile_long_record_kernels()  # the event detector's running median among them
     gap = np.arange(white.size) % 1000 == 7
     allan_curves([white], 0.01, excluded=gap)  # the gap-tolerant sums
     Whitener(NoisePsd(1.0, 0.0, np.inf, 0.0), white.size, 0.01, gap)  # blocks left out

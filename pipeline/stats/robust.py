@@ -6,7 +6,9 @@ makes three more; on a 24 h / 1 kHz record (86.4 M samples, 691 MB a copy) those
 dominate the memory of an analysis.  Here the order statistics are selected by repeated
 histogramming of the values in a shrinking range: each pass reads the series once, forms each
 value on the fly (x_i, or x_{i+1} − x_i, optionally as |v − centre|) and allocates only
-:data:`SELECT_BINS` bins.  The results equal numpy's bit for bit (tests/stats/test_robust.py).
+:data:`SELECT_BINS` bins.  A series of at most :data:`NUMPY_MAX` values is ranked by numpy
+itself: its copies are small there, and the selection's kernels then never compile on a first
+run.  The results equal numpy's bit for bit either way (tests/stats/test_robust.py).
 """
 
 from __future__ import annotations
@@ -18,6 +20,11 @@ from imupipe.jit import kernel_input, on_parts, part_bounds, parts, spread
 
 SELECT_BINS = 1 << 16
 """Histogram bins of each selection pass."""
+NUMPY_MAX = 1 << 20
+"""Longest series whose order statistics numpy computes (its temporaries: ≤ 8 MB each) rather
+than the histogram selection: the 5-min sample's, a real 2.8 h / 100 Hz unit's (10⁶ samples) and
+a 1 h / 100 Hz fleet unit's.  The selection's kernels cost ~1.4 s of compiling on a first run
+(session 34, cold numba cache)."""
 MAD_TO_SIGMA = 1.4826
 """1 / Φ⁻¹(3/4): the MAD of a Gaussian sample times this estimates its standard deviation."""
 
@@ -175,17 +182,55 @@ def _order_statistics(
     return rest[i], rest[i + 1] if i + 1 < rest.size else second
 
 
+def _numpy_values(
+    x: np.ndarray, center: float, absolute: bool, diff: bool, positive: bool
+) -> np.ndarray | None:
+    """The values of :func:`_value` as one float64 array (only those > 0 if ``positive``), or
+    ``None`` when one of them is not finite: what the selection ranks, for numpy to rank."""
+    v = np.asarray(x, dtype=np.float64)
+    if diff:
+        v = v[1:] - v[:-1]
+    if absolute:
+        v = np.abs(v - center)
+    if not np.isfinite(v).all():
+        return None
+    return v[v > 0] if positive else v
+
+
 def _median(
     x: np.ndarray, center: float = 0.0, absolute: bool = False, diff: bool = False,
     positive: bool = False,
 ) -> float:  # fmt: skip
     """Median of the values of :func:`_value` (NaN if there are none or one is not finite)."""
+    if len(x) <= NUMPY_MAX:
+        v = _numpy_values(x, center, absolute, diff, positive)
+        return float("nan") if v is None or v.size == 0 else float(np.median(v))
+    return _selected_median(x, center, absolute, diff, positive)
+
+
+def _selected_median(
+    x: np.ndarray, center: float, absolute: bool, diff: bool, positive: bool
+) -> float:
+    """:func:`_median` by histogram selection (no copy of ``x``)."""
     x = kernel_input(x)
     count, lo, hi, finite = _extent(x, center, absolute, diff, positive)
     if count == 0 or not finite:
         return float("nan")
     first, second = _order_statistics(x, (count - 1) // 2, lo, hi, center, absolute, diff)
     return float(first if count % 2 else (first + second) / 2)
+
+
+def compile_long_record_kernels() -> None:
+    """Compile the kernels of a long record's statistics (or load them from numba's disk cache)
+    with the types the analysis passes them: the histogram selection on float64 and float32
+    series, a bin of many equal values gathered, and the running median with a gap
+    (:func:`imupipe.analysis.analyze.compile_kernels`; a series as short as these is ranked by
+    numpy)."""
+    white = np.random.default_rng(0).standard_normal(4096)
+    for x in (np.append(np.cumsum(white), 1e12), white.astype(np.float32)):
+        _selected_median(x, 0.0, True, True, True)
+        _selected_median(x, 0.0, False, False, False)
+    _kernel_running_median(kernel_input(white.reshape(-1, 2), np.float64), 16, 2)
 
 
 def median(x: np.ndarray, differences: bool = False) -> float:
@@ -241,7 +286,13 @@ def quantum(x: np.ndarray, probe: int = QUANTUM_PROBE) -> float:
 
 def abs_quantile(x: np.ndarray, p: float) -> float:
     """``np.quantile(np.abs(v), p, method="higher")`` of the finite values v = x, without
-    copies: order statistic ceil(p (n - 1)) of |x| by histogram selection."""
+    copies: order statistic ceil(p (n - 1)) of |x| by histogram selection (by numpy for at
+    most :data:`NUMPY_MAX` values)."""
+    if len(x) <= NUMPY_MAX:
+        v = _numpy_values(x, 0.0, True, False, False)
+        return (
+            float("nan") if v is None or v.size == 0 else float(np.quantile(v, p, method="higher"))
+        )
     x = kernel_input(x)
     count, lo, hi, finite = _extent(x, 0.0, True, False, False)
     if count == 0 or not finite:
@@ -320,7 +371,27 @@ def running_median(x: np.ndarray, half: int, gap: int = 0) -> np.ndarray:
         raise ValueError("running_median: a finite 2-D array")
     if not 0 <= gap <= half:
         raise ValueError("running_median: 0 <= gap <= half")
+    width = 2 * half + 1 if gap == 0 else 2 * (half - gap + 1)
+    if x.size * width <= NUMPY_MAX:  # a short record's: numpy, and no kernel to compile
+        return _numpy_running_median(x, half, gap)
+    return _kernel_running_median(x, half, gap)
+
+
+def _kernel_running_median(x: np.ndarray, half: int, gap: int) -> np.ndarray:
+    """:func:`running_median` by :func:`_running_median`, a column a job on the usable cores."""
     out = np.empty(x.shape)
     if x.shape[0] > 0:
         spread(lambda start, step: _running_median(x, half, gap, out, start, step), x.shape[1])
     return out
+
+
+def _numpy_running_median(x: np.ndarray, half: int, gap: int) -> np.ndarray:
+    """:func:`running_median` by numpy's median of every window at once (x.size × the window's
+    width values): the edge rows repeated, the rows within ``gap`` − 1 of the centre left out."""
+    if x.shape[0] == 0:
+        return np.empty(x.shape)
+    padded = np.pad(x, ((half, half), (0, 0)), mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1, axis=0)
+    if gap > 0:  # offsets −half … −gap and gap … half of each row's window
+        windows = np.concatenate([windows[..., : half - gap + 1], windows[..., half + gap :]], -1)
+    return np.median(windows, axis=-1)

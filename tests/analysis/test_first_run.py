@@ -1,6 +1,8 @@
-"""A first run after installing, numba's disk cache empty: the IEEE 952 fit's and the loop's
-kernels are compiled ahead by a child process (imupipe.model.ahead), every kernel compiles once,
-and report.json is the same as from a run that compiles in process."""
+"""A first run after installing, numba's disk cache empty: the IEEE 952 fit's kernels are
+compiled ahead by a child process (imupipe.model.ahead) and the loop's by the analysing process
+while it waits for the child, every kernel compiles once, a short record's statistics compile
+none of the long-record kernels, and report.json is the same as from a run that compiles in
+process."""
 
 from __future__ import annotations
 
@@ -42,9 +44,10 @@ from imupipe.model.ahead import late_kernels
 
 ahead_module.WAIT_S = 3600.0  # a loaded machine may take minutes: this test is not timed
 _child = ahead_module.child_command
-# the child starts late: a late kernel called before the wait then compiles here, every time
-ahead_module.child_command = lambda loop: [
-    _child(loop)[0], "-c", "import time; time.sleep(3); " + _child(loop)[-1]
+# the child starts late: a late kernel called before the wait then compiles here, every time,
+# and the wait always finds it running
+ahead_module.child_command = lambda loop, taken=None: [
+    _child(loop, taken)[0], "-c", "import time; time.sleep(3); " + _child(loop, taken)[-1]
 ]
 
 cold = [not disk_cached(k) for k in late_kernels(True)]
@@ -62,10 +65,20 @@ print(json.dumps({
 }))
 """
 
-LATE = {f"{k.py_func.__module__}.{k.py_func.__qualname__}" for k in ahead.late_kernels(True)}
 
-TWO_DTYPES = {"imupipe.stats.robust._extent_parts", "imupipe.stats.robust._histogram_parts"}
-"""Kernels called on float64 series and on float32 deviations (effects.spike_candidate)."""
+def names(kernels) -> set[str]:
+    return {f"{k.py_func.__module__}.{k.py_func.__qualname__}" for k in kernels}
+
+
+FIT, LOOP = names(ahead.FIT_KERNELS), names(ahead.LOOP_KERNELS)
+LONG_RECORD = {
+    "imupipe.stats.robust._extent_parts",
+    "imupipe.stats.robust._histogram_parts",
+    "imupipe.stats.robust._gather_parts",
+    "imupipe.stats.robust._rank_bin",
+    "imupipe.stats.robust._running_median",
+}
+"""The robust statistics' kernels, for records of over ``robust.NUMPY_MAX`` values."""
 LITERAL_FLAG = {"imupipe.stats.edf._value"}
 """Called with the literal ``phase=True`` by the gather in edf._acf_ids (inlined by LLVM) and
 with a runtime flag by _acf_power: a tiny function, two specialisations."""
@@ -93,18 +106,25 @@ def child_failed_report(tmp_path_factory: pytest.TempPathFactory) -> dict:
     compile (or load) in this process."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(ahead, "disk_cached", lambda kernel: False)
-        mp.setattr(ahead, "child_command", lambda loop: [sys.executable, "-c", "exit(3)"])
+        mp.setattr(
+            ahead, "child_command", lambda loop, taken=None: [sys.executable, "-c", "exit(3)"]
+        )
         out = tmp_path_factory.mktemp("failed-child")
         imupipe.analyze(SAMPLE, out, rrd=False, figures=False)
     return json.loads((out / "report.json").read_text())
 
 
-def test_cold_cache_child_compiles_the_late_kernels(cold_run: dict) -> None:
+def test_cold_cache_child_compiles_the_fit_and_the_waiting_analysis_the_loop(
+    cold_run: dict,
+) -> None:
     assert all(cold_run["cold_before"])
     assert all(cold_run["cached_after"])
+    here = cold_run["compiled_here"]
     # the analysis loaded the child's compiled kernels: same types, nothing compiled twice
-    assert LATE.isdisjoint(cold_run["compiled_here"])
-    assert "imupipe.stats.allan._block_sums" in cold_run["compiled_here"]
+    assert FIT.isdisjoint(here)
+    assert all(here.count(name) == 1 for name in LOOP)  # while the child compiled the fit's
+    assert "imupipe.stats.allan._block_sums" in here
+    assert LONG_RECORD.isdisjoint(here)  # 30,000 samples: numpy's order statistics
 
 
 def test_each_kernel_compiles_once_on_the_sample(cold_run: dict) -> None:
@@ -114,7 +134,7 @@ def test_each_kernel_compiles_once_on_the_sample(cold_run: dict) -> None:
     assert counts["imupipe.model.ieee952._fit_gamma"] == 1
     assert counts["imupipe.stats.edf._acf_pass"] == 1
     several = {name: n for name, n in counts.items() if n > 1}
-    assert several == dict.fromkeys(TWO_DTYPES | LITERAL_FLAG, 2)
+    assert several == dict.fromkeys(LITERAL_FLAG, 2)
 
 
 def test_cold_cache_report_equals_the_in_process_report(
@@ -132,7 +152,9 @@ def test_cold_cache_report_equals_the_in_process_report(
 
 def test_failed_child_is_waited_for_and_forgotten(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
-    monkeypatch.setattr(ahead, "child_command", lambda loop: [sys.executable, "-c", "exit(3)"])
+    monkeypatch.setattr(
+        ahead, "child_command", lambda loop, taken=None: [sys.executable, "-c", "exit(3)"]
+    )
     with ahead.compile_ahead(loop=True) as started:
         assert started.child is not None
         child = started.child
@@ -142,7 +164,9 @@ def test_failed_child_is_waited_for_and_forgotten(monkeypatch: pytest.MonkeyPatc
 
 
 def test_warm_cache_or_fleet_worker_starts_no_child(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(ahead, "child_command", lambda loop: pytest.fail("a child was started"))
+    monkeypatch.setattr(
+        ahead, "child_command", lambda loop, taken=None: pytest.fail("a child was started")
+    )
     monkeypatch.setattr(ahead, "disk_cached", lambda kernel: True)
     assert ahead.compile_ahead(loop=True).child is None
     monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
@@ -157,8 +181,65 @@ def test_without_the_loop_its_kernels_are_not_compiled_ahead() -> None:
 def test_an_analysis_ending_early_stops_the_child(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
     sleeper = [sys.executable, "-c", "import time; time.sleep(60)"]
-    monkeypatch.setattr(ahead, "child_command", lambda loop: sleeper)
+    monkeypatch.setattr(ahead, "child_command", lambda loop, taken=None: sleeper)
     with pytest.raises(imupipe.ImupipeError), ahead.compile_ahead(loop=True) as started:
         child = started.child
         raise imupipe.ImupipeError("bad input")
     assert child.poll() is not None  # killed, not left running
+
+
+def test_a_wait_that_finds_the_child_compiling_takes_the_loops_kernels(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The child still runs: the waiting process leaves the note, compiles the loop's kernels
+    itself and then waits; the child, reading the note, leaves them (exit 0 here only if it
+    saw the note); the note is removed."""
+    monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
+    reads = (
+        "import sys, time, pathlib; time.sleep(1); "
+        "sys.exit(0 if pathlib.Path({!r}).exists() else 5)"
+    )
+    monkeypatch.setattr(
+        ahead, "child_command", lambda loop, taken: [sys.executable, "-c", reads.format(str(taken))]
+    )
+    compiled: list[int] = []
+    monkeypatch.setattr(ahead, "compile_loop_kernels", lambda: compiled.append(1))
+    with ahead.compile_ahead(loop=True) as started:
+        child, note = started.child, started.taken
+        assert not note.exists()
+        started.wait()
+    assert child.returncode == 0 and compiled == [1]
+    assert not note.exists() and started.taken is None
+
+
+def test_a_wait_after_the_child_ended_compiles_nothing_here(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A long record reaches the wait after the child has compiled everything: nothing to do."""
+    monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
+    monkeypatch.setattr(ahead, "child_command", lambda loop, taken: [sys.executable, "-c", ""])
+    compiled: list[int] = []
+    monkeypatch.setattr(ahead, "compile_loop_kernels", lambda: compiled.append(1))
+    with ahead.compile_ahead(loop=True) as started:
+        started.child.wait()
+        started.wait()
+    assert compiled == []
+    with ahead.compile_ahead(loop=False) as started:  # no loop: no note, nothing taken
+        assert started.taken is None
+        started.wait()
+    assert compiled == []
+
+
+@pytest.mark.parametrize("noted", [True, False])
+def test_the_child_leaves_the_loops_kernels_when_noted(
+    noted: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    compiled: list[int] = []
+    monkeypatch.setattr(ahead, "compile_loop_kernels", lambda: compiled.append(1))
+    note = tmp_path / "taken"
+    if noted:
+        note.touch()
+    ahead.compile_late_kernels(True, str(note))
+    assert compiled == ([] if noted else [1])
+    ahead.compile_late_kernels(False, None)
+    assert compiled == ([] if noted else [1])

@@ -1,4 +1,6 @@
-"""imupipe.stats.robust (exact O(n) histogram selection, no copies) equals numpy bit for bit."""
+"""imupipe.stats.robust (exact O(n) histogram selection, no copies) equals numpy bit for bit; each
+test runs on both paths: numpy's for a short series, the selection for a long one (forced here by
+``NUMPY_MAX``)."""
 
 from __future__ import annotations
 
@@ -7,6 +9,7 @@ import pytest
 from scipy import ndimage
 
 from imupipe import jit
+from imupipe.stats import robust
 from imupipe.stats.robust import (
     abs_quantile,
     mad,
@@ -30,6 +33,14 @@ CASES = {
     "inf": np.array([np.inf, 1.0, 2.0, 3.0]),
 }
 FINITE = [k for k in CASES if k not in ("nan", "inf")]
+
+
+@pytest.fixture(autouse=True, params=["numpy", "selection"])
+def path(request, monkeypatch) -> str:
+    """Every test on numpy's path and on the histogram selection's."""
+    if request.param == "selection":
+        monkeypatch.setattr(robust, "NUMPY_MAX", -1)
+    return request.param
 
 
 @pytest.mark.parametrize("name", CASES)
@@ -160,3 +171,21 @@ def test_row_medians_equal_numpys_bit_for_bit(width):
     got = row_medians(rows)
     assert np.array_equal(got, np.median(rows, axis=1), equal_nan=True)
     assert np.isnan(got[0]) and np.isnan(got).sum() == 1
+
+
+def test_a_short_series_is_ranked_by_numpy_a_long_one_by_the_selection(monkeypatch):
+    """Up to NUMPY_MAX values numpy ranks them (the selection's kernels never compile on a short
+    record's first run); beyond, the histogram selection, which copies nothing."""
+    monkeypatch.setattr(robust, "NUMPY_MAX", 100)
+    passes: list[int] = []
+    extent = robust._extent
+    monkeypatch.setattr(robust, "_extent", lambda x, *a: passes.append(len(x)) or extent(x, *a))
+    x = RNG.standard_normal(101)
+    short, d = x[:100], np.diff(x[:100])
+    assert median(short) == np.median(short)
+    assert abs_quantile(short, 0.5) == np.quantile(np.abs(short), 0.5, method="higher")
+    assert mad(short, differences=True) == np.median(np.abs(d - np.median(d)))
+    assert passes == []  # 100 values: numpy's
+    assert median(x) == np.median(x)
+    assert abs_quantile(x, 0.5) == np.quantile(np.abs(x), 0.5, method="higher")
+    assert passes == [101, 101]
