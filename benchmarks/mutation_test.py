@@ -56,6 +56,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     "pipeline/stats/avar_covariance.py": ("tests/stats/test_avar_covariance.py",),
     "pipeline/pages.py": ("tests/test_pages.py",),
     "pipeline/model/spectral_line.py": ("tests/model/test_spectral_line.py",),
+    "pipeline/model/ahead.py": ("tests/analysis/test_first_run.py",),
     "pipeline/stats/robust.py": (
         "tests/stats/test_robust_mutants.py",
         "tests/stats/test_robust.py",
