@@ -401,7 +401,7 @@ def analyze(
         ) as source,
     ):
         if source.spilled:
-            ahead.wait()  # then the spilled path's own child compiles only the others
+            ahead.wait(take_loop=False)  # the child compiles the loop's too; load_kernels the rest
             with progress.stage("compile", 1, "step"):
                 load_kernels(options.loop)
         rec = source.conditioning()

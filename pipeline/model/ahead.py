@@ -76,16 +76,21 @@ class Ahead:
         self.taken = taken
         self._waiting = threading.Lock()
 
-    def wait(self) -> None:
+    def wait(self, take_loop: bool = True) -> None:
         """Wait for the child (at most :data:`WAIT_S`, then stop it), compiling the loop's
-        kernels here meanwhile if it still runs; idempotent, and safe to call from the threads
+        kernels here meanwhile if it still runs (and ``take_loop``: not where another child
+        compiles everything, the spilled path); idempotent, and safe to call from the threads
         that analyse the axes at once."""
         with self._waiting:
             if self.child is None:
                 return
-            if self.taken is not None and self.child.poll() is None:
-                self.taken.touch()  # read by the child once the fit's chain is compiled
-                compile_loop_kernels()
+            if take_loop and self.taken is not None and self.child.poll() is None:
+                try:
+                    self.taken.touch()  # read by the child once the fit's chain is compiled
+                except OSError:  # no note (a read-only temporary folder): the child takes them
+                    pass
+                else:
+                    compile_loop_kernels()
             try:
                 self.child.wait(WAIT_S)
             except subprocess.TimeoutExpired:

@@ -227,7 +227,8 @@ def compile_long_record_kernels() -> None:
     (:func:`imupipe.analysis.analyze.compile_kernels`; a series as short as these is ranked by
     numpy)."""
     white = np.random.default_rng(0).standard_normal(4096)
-    for x in (np.append(np.cumsum(white), 1e12), white.astype(np.float32)):
+    walk = np.append(np.cumsum(white), 1e12)  # its values but one in one bin: gathered
+    for x in (walk, walk.astype(np.float32)):
         _selected_median(x, 0.0, True, True, True)
         _selected_median(x, 0.0, False, False, False)
     _kernel_running_median(kernel_input(white.reshape(-1, 2), np.float64), 16, 2)

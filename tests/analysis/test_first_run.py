@@ -212,6 +212,31 @@ def test_a_wait_that_finds_the_child_compiling_takes_the_loops_kernels(
     assert not note.exists() and started.taken is None
 
 
+@pytest.mark.parametrize("case", ["spilled", "no_note"])
+def test_a_wait_that_cannot_or_must_not_take_the_loops_kernels_leaves_them_to_the_child(
+    case: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The spilled path's wait (its own child compiles every kernel next, and this process
+    should not hold LLVM's memory), or a note that cannot be written (a read-only temporary
+    folder): nothing compiled here, the child not noted (it exits 5 here)."""
+    monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
+    reads = (
+        "import sys, time, pathlib; time.sleep(1); "
+        "sys.exit(0 if pathlib.Path({!r}).exists() else 5)"
+    )
+    monkeypatch.setattr(
+        ahead, "child_command", lambda loop, taken: [sys.executable, "-c", reads.format(str(taken))]
+    )
+    compiled: list[int] = []
+    monkeypatch.setattr(ahead, "compile_loop_kernels", lambda: compiled.append(1))
+    with ahead.compile_ahead(loop=True) as started:
+        child = started.child
+        if case == "no_note":
+            started.taken = tmp_path / "missing-folder" / "note"
+        started.wait(take_loop=case != "spilled")
+    assert child.returncode == 5 and compiled == []
+
+
 def test_a_wait_after_the_child_ended_compiles_nothing_here(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:

@@ -4,6 +4,10 @@ test runs on both paths: numpy's for a short series, the selection for a long on
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -33,6 +37,7 @@ CASES = {
     "inf": np.array([np.inf, 1.0, 2.0, 3.0]),
 }
 FINITE = [k for k in CASES if k not in ("nan", "inf")]
+DEFAULT_NUMPY_MAX = robust.NUMPY_MAX  # before any test's monkeypatch
 
 
 @pytest.fixture(autouse=True, params=["numpy", "selection"])
@@ -189,3 +194,106 @@ def test_a_short_series_is_ranked_by_numpy_a_long_one_by_the_selection(monkeypat
     assert median(x) == np.median(x)
     assert abs_quantile(x, 0.5) == np.quantile(np.abs(x), 0.5, method="higher")
     assert passes == [101, 101]
+
+
+@pytest.mark.parametrize(("half", "gap", "width"), [(16, 0, 33), (16, 2, 30), (3, 3, 2)])
+def test_the_running_median_takes_numpys_path_up_to_numpy_max_window_values(
+    half, gap, width, monkeypatch
+):
+    """Rows × columns × the window's width values at most NUMPY_MAX: numpy's sliding windows
+    (2 half + 1 rows wide, or 2 (half − gap + 1) without the centre's); one more: the kernel."""
+    monkeypatch.setattr(robust, "NUMPY_MAX", 10 * 2 * width)
+    taken: list[str] = []
+    for name in ("_numpy_running_median", "_kernel_running_median"):
+        real = getattr(robust, name)
+        monkeypatch.setattr(
+            robust, name, lambda x, h, g, real=real, name=name: taken.append(name) or real(x, h, g)
+        )
+    fits = RNG.standard_normal((10, 2))
+    assert np.array_equal(
+        running_median(fits, half, gap),
+        robust._kernel_running_median(kernel_input_2d(fits), half, gap),
+    )
+    running_median(RNG.standard_normal((11, 2)), half, gap)  # one row more: 22 × width
+    assert taken == ["_numpy_running_median", "_kernel_running_median", "_kernel_running_median"]
+
+
+def kernel_input_2d(x: np.ndarray) -> np.ndarray:
+    return jit.kernel_input(x, np.float64)
+
+
+def test_the_order_statistics_take_numpys_path_up_to_numpy_max_values(monkeypatch):
+    monkeypatch.setattr(robust, "NUMPY_MAX", 50)
+    passes: list[int] = []
+    extent = robust._extent
+    monkeypatch.setattr(robust, "_extent", lambda x, *a: passes.append(len(x)) or extent(x, *a))
+    x = RNG.standard_normal(51)
+    median(x[:50]), median(x[:49]), abs_quantile(x[:50], 0.9), abs_quantile(x[:49], 0.9)
+    assert passes == []
+    median(x), abs_quantile(x, 0.9)
+    assert passes == [51, 51]
+
+
+def test_numpy_max_keeps_a_real_unit_on_numpy_and_12_h_on_the_selection():
+    """A real 2.8 h ADIS16405 unit (10⁶ samples) and a 1 h / 100 Hz fleet unit take numpy's
+    path; 12 h at 100 Hz (4.32 M samples: 35 MB a copy) the selection, which copies nothing."""
+    assert 1_000_000 <= DEFAULT_NUMPY_MAX < 4_320_000
+
+
+def test_a_negative_gap_is_refused():
+    with pytest.raises(ValueError, match="0 <= gap <= half"):
+        running_median(np.zeros((5, 1)), 3, -1)
+
+
+def test_one_value_and_none(path):
+    assert abs_quantile(np.array([2.0]), 0.5) == 2.0
+    assert abs_quantile(np.array([-2.0]), 0.999) == 2.0
+    assert median(np.array([3.0])) == 3.0
+    assert np.isnan(abs_quantile(np.array([]), 0.5))
+    assert np.isnan(mad(np.array([])))
+
+
+def test_a_single_row_running_median_is_the_row(path):
+    """The edge rows repeated: a single row's window holds only it (the output is written,
+    not left as whatever memory np.empty handed out)."""
+    for _ in range(3):
+        np.full((1, 4), np.nan)  # a freed block of NaN for np.empty to hand out again
+        x = np.array([[1.0, -2.0, 3.5, 0.0]])
+        assert np.array_equal(running_median(x, 3), x)
+        assert np.array_equal(running_median(x, 3, 1), x)
+
+
+def test_compile_long_record_kernels_compiles_every_type_a_long_record_passes():
+    """In a fresh interpreter: after it, each selection kernel holds a float64 and a float32
+    specialisation (read-only C arrays, what kernel_input hands over), the running median one."""
+    probe = (
+        "import json; from imupipe.stats import robust as r; r.compile_long_record_kernels(); "
+        "print(json.dumps({k.__name__: sorted(str(s[0]) for s in k.signatures) for k in "
+        "(r._extent_parts, r._histogram_parts, r._gather_parts, r._rank_bin, r._running_median)}))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    sigs = json.loads(done.stdout.splitlines()[-1])
+    ro = "readonly array({}, {}d, C)"
+    assert (
+        sigs["_extent_parts"]
+        == sigs["_histogram_parts"]
+        == sorted([ro.format("float32", 1), ro.format("float64", 1)])
+    )
+    assert sigs["_gather_parts"] == sigs["_extent_parts"]
+    assert sigs["_rank_bin"] == ["array(int64, 1d, C)"]
+    assert sigs["_running_median"] == [ro.format("float64", 2)]
+
+
+@pytest.mark.parametrize("p", [0.1, 0.25, 0.5, 0.9])
+@pytest.mark.parametrize("name", FINITE)
+def test_abs_quantile_equals_numpys_at_any_level(name, p):
+    """Of |x|, zeros included (two_levels: a quarter of the values)."""
+    x = CASES[name]
+    assert abs_quantile(x, p) == np.quantile(np.abs(x), p, method="higher")
+
+
+def test_the_running_median_of_no_rows_and_of_a_1d_series():
+    assert running_median(np.zeros((0, 3)), 4).shape == (0, 3)
+    assert running_median(np.zeros((0, 3)), 4, 2).shape == (0, 3)
+    with pytest.raises(ValueError, match="a finite 2-D array"):
+        running_median(np.zeros(5), 2)
