@@ -202,20 +202,23 @@ def test_the_running_median_takes_numpys_path_up_to_numpy_max_window_values(
 ):
     """Rows × columns × the window's width values at most NUMPY_MAX: numpy's sliding windows
     (2 half + 1 rows wide, or 2 (half − gap + 1) without the centre's); one more: the kernel."""
-    monkeypatch.setattr(robust, "NUMPY_MAX", 10 * 2 * width)
     taken: list[str] = []
     for name in ("_numpy_running_median", "_kernel_running_median"):
         real = getattr(robust, name)
         monkeypatch.setattr(
             robust, name, lambda x, h, g, real=real, name=name: taken.append(name) or real(x, h, g)
         )
-    fits = RNG.standard_normal((10, 2))
-    assert np.array_equal(
-        running_median(fits, half, gap),
-        robust._kernel_running_median(kernel_input_2d(fits), half, gap),
-    )
-    running_median(RNG.standard_normal((11, 2)), half, gap)  # one row more: 22 × width
-    assert taken == ["_numpy_running_median", "_kernel_running_median", "_kernel_running_median"]
+    x = RNG.standard_normal((22, 1))
+    expected = robust._kernel_running_median(kernel_input_2d(x[:21]), half, gap)
+    taken.clear()
+    monkeypatch.setattr(robust, "NUMPY_MAX", 21 * width)  # 21 rows exactly: numpy's
+    assert np.array_equal(running_median(x[:21], half, gap), expected)
+    running_median(x, half, gap)
+    monkeypatch.setattr(robust, "NUMPY_MAX", 21 * width - 1)  # one value short: the kernel's
+    running_median(x[:21], half, gap)
+    running_median(x[:20], half, gap)
+    numpy, kernel = "_numpy_running_median", "_kernel_running_median"
+    assert taken == [numpy, kernel, kernel, numpy]
 
 
 def kernel_input_2d(x: np.ndarray) -> np.ndarray:
@@ -245,6 +248,7 @@ def test_a_negative_gap_is_refused():
         running_median(np.zeros((5, 1)), 3, -1)
 
 
+@pytest.mark.filterwarnings("error")  # numpy's "Mean of empty slice" is not for the user
 def test_one_value_and_none(path):
     assert abs_quantile(np.array([2.0]), 0.5) == 2.0
     assert abs_quantile(np.array([-2.0]), 0.999) == 2.0
