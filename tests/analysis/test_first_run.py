@@ -268,3 +268,12 @@ def test_the_child_leaves_the_loops_kernels_when_noted(
     assert compiled == ([] if noted else [1])
     ahead.compile_late_kernels(False, None)
     assert compiled == ([] if noted else [1])
+
+
+def test_the_child_is_told_where_the_note_would_be(tmp_path: Path) -> None:
+    note = tmp_path / "it's a note"
+    assert ahead.child_command(True, note)[-1].endswith(
+        f"compile_late_kernels(True, {str(note)!r})"
+    )
+    assert ahead.child_command(False)[-1].endswith("compile_late_kernels(False, None)")
+    assert ahead.child_command(True)[-1].endswith("compile_late_kernels(True, None)")
