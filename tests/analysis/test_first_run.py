@@ -188,12 +188,9 @@ def test_an_analysis_ending_early_stops_the_child(monkeypatch: pytest.MonkeyPatc
     assert child.poll() is not None  # killed, not left running
 
 
-def test_a_wait_that_finds_the_child_compiling_takes_the_loops_kernels(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """The child still runs: the waiting process leaves the note, compiles the loop's kernels
-    itself and then waits; the child, reading the note, leaves them (exit 0 here only if it
-    saw the note); the note is removed."""
+def noting_child(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """A cold cache and a child that exits, after a second, 0 if it finds the note and 5 if not;
+    returns the list a call of ``compile_loop_kernels`` here appends to."""
     monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
     reads = (
         "import sys, time, pathlib; time.sleep(1); "
@@ -204,6 +201,16 @@ def test_a_wait_that_finds_the_child_compiling_takes_the_loops_kernels(
     )
     compiled: list[int] = []
     monkeypatch.setattr(ahead, "compile_loop_kernels", lambda: compiled.append(1))
+    return compiled
+
+
+def test_a_wait_that_finds_the_child_compiling_takes_the_loops_kernels(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The child still runs: the waiting process leaves the note, compiles the loop's kernels
+    itself and then waits; the child, reading the note, leaves them (exit 0 here only if it
+    saw the note); the note is removed."""
+    compiled = noting_child(monkeypatch)
     with ahead.compile_ahead(loop=True) as started:
         child, note = started.child, started.taken
         assert not note.exists()
@@ -219,16 +226,7 @@ def test_a_wait_that_cannot_or_must_not_take_the_loops_kernels_leaves_them_to_th
     """The spilled path's wait (its own child compiles every kernel next, and this process
     should not hold LLVM's memory), or a note that cannot be written (a read-only temporary
     folder): nothing compiled here, the child not noted (it exits 5 here)."""
-    monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
-    reads = (
-        "import sys, time, pathlib; time.sleep(1); "
-        "sys.exit(0 if pathlib.Path({!r}).exists() else 5)"
-    )
-    monkeypatch.setattr(
-        ahead, "child_command", lambda loop, taken: [sys.executable, "-c", reads.format(str(taken))]
-    )
-    compiled: list[int] = []
-    monkeypatch.setattr(ahead, "compile_loop_kernels", lambda: compiled.append(1))
+    compiled = noting_child(monkeypatch)
     with ahead.compile_ahead(loop=True) as started:
         child = started.child
         if case == "no_note":
