@@ -119,11 +119,6 @@ class Ahead:
             self._forget()
 
 
-def late_kernels(loop: bool) -> tuple[object, ...]:
-    """The late kernels an analysis with (or without) the closed loop calls."""
-    return FIT_KERNELS + (LOOP_KERNELS if loop else ())
-
-
 def child_command(loop: bool, taken: Path | None = None) -> list[str]:
     """The child's command line: this Python running :func:`compile_late_kernels`."""
     code = (

@@ -304,7 +304,7 @@ def abs_quantile(x: np.ndarray, p: float) -> float:
 
 @numba.njit(cache=True, nogil=True)
 def _running_median(
-    x: np.ndarray, half: int, gap: int, out: np.ndarray, start: int, step: int
+    x: np.ndarray, half: int, gap: int, width: int, out: np.ndarray, start: int, step: int
 ) -> None:  # pragma: no cover (JIT)
     """Columns ``start, start + step, …`` of :func:`running_median` into ``out`` (one
     :func:`imupipe.jit.spread` job a column): a sorted window of the rows at offsets
@@ -314,7 +314,6 @@ def _running_median(
     built by insertion, and binary searches are written out (numba's ``sort`` and
     ``np.searchsorted`` would add ~3 s of compiling to a first run)."""
     rows, cols = x.shape
-    width = 2 * half + 1 if gap == 0 else 2 * (half - gap + 1)
     window = np.empty(width)
     for c in range(start, cols, step):
         j = 0
@@ -372,25 +371,32 @@ def running_median(x: np.ndarray, half: int, gap: int = 0) -> np.ndarray:
         raise ValueError("running_median: a finite 2-D array")
     if not 0 <= gap <= half:
         raise ValueError("running_median: 0 <= gap <= half")
-    width = 2 * half + 1 if gap == 0 else 2 * (half - gap + 1)
-    if x.size * width <= NUMPY_MAX:  # a short record's: numpy, and no kernel to compile
+    if x.shape[0] == 0:
+        return np.empty(x.shape)
+    if x.size * _window_width(half, gap) <= NUMPY_MAX:  # a short record's: no kernel to compile
         return _numpy_running_median(x, half, gap)
     return _kernel_running_median(x, half, gap)
 
 
+def _window_width(half: int, gap: int) -> int:
+    """Rows in :func:`running_median`'s window: 2 ``half`` + 1, or without the 2 ``gap`` − 1
+    about the centre."""
+    return 2 * half + 1 if gap == 0 else 2 * (half - gap + 1)
+
+
 def _kernel_running_median(x: np.ndarray, half: int, gap: int) -> np.ndarray:
-    """:func:`running_median` by :func:`_running_median`, a column a job on the usable cores."""
+    """:func:`running_median` of at least one row by :func:`_running_median`, a column a job on
+    the usable cores."""
     out = np.empty(x.shape)
-    if x.shape[0] > 0:
-        spread(lambda start, step: _running_median(x, half, gap, out, start, step), x.shape[1])
+    width = _window_width(half, gap)
+    spread(lambda start, step: _running_median(x, half, gap, width, out, start, step), x.shape[1])
     return out
 
 
 def _numpy_running_median(x: np.ndarray, half: int, gap: int) -> np.ndarray:
-    """:func:`running_median` by numpy's median of every window at once (x.size × the window's
-    width values): the edge rows repeated, the rows within ``gap`` − 1 of the centre left out."""
-    if x.shape[0] == 0:
-        return np.empty(x.shape)
+    """:func:`running_median` of at least one row by numpy's median of every window at once
+    (x.size × the window's width values): the edge rows repeated, the rows within ``gap`` − 1
+    of the centre left out."""
     padded = np.pad(x, ((half, half), (0, 0)), mode="edge")
     windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1, axis=0)
     if gap > 0:  # offsets −half … −gap and gap … half of each row's window

@@ -40,7 +40,7 @@ ev.register("numba:compile", Listener())
 import imupipe
 from imupipe.jit import disk_cached
 import imupipe.model.ahead as ahead_module
-from imupipe.model.ahead import late_kernels
+from imupipe.model.ahead import FIT_KERNELS, LOOP_KERNELS
 
 ahead_module.WAIT_S = 3600.0  # a loaded machine may take minutes: this test is not timed
 _child = ahead_module.child_command
@@ -50,7 +50,7 @@ ahead_module.child_command = lambda loop, taken=None: [
     _child(loop, taken)[0], "-c", "import time; time.sleep(3); " + _child(loop, taken)[-1]
 ]
 
-cold = [not disk_cached(k) for k in late_kernels(True)]
+cold = [not disk_cached(k) for k in FIT_KERNELS + LOOP_KERNELS]
 imupipe.analyze(sys.argv[1], out=sys.argv[2], rrd=False, figures=False)
 kernels = {
     f"{d.py_func.__module__}.{d.py_func.__qualname__}": len(d.signatures)
@@ -59,7 +59,7 @@ kernels = {
 }
 print(json.dumps({
     "cold_before": cold,
-    "cached_after": [disk_cached(k) for k in late_kernels(True)],
+    "cached_after": [disk_cached(k) for k in FIT_KERNELS + LOOP_KERNELS],
     "compiled_here": compiled,
     "signatures": kernels,
 }))
@@ -173,9 +173,18 @@ def test_warm_cache_or_fleet_worker_starts_no_child(monkeypatch: pytest.MonkeyPa
     assert ahead.compile_ahead(loop=True, enabled=False).child is None
 
 
-def test_without_the_loop_its_kernels_are_not_compiled_ahead() -> None:
-    assert set(ahead.late_kernels(False)) == set(ahead.FIT_KERNELS)
-    assert set(ahead.LOOP_KERNELS) <= set(ahead.late_kernels(True))
+def test_without_the_loop_its_kernels_are_not_compiled_ahead(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """No loop: the child compiles the fit's kernels only, and no note is kept.  The fit's
+    kernels alone decide whether a child starts (a cold loop kernel compiles where it is
+    called)."""
+    compiled: list[int] = []
+    monkeypatch.setattr(ahead, "compile_loop_kernels", lambda: compiled.append(1))
+    ahead.compile_late_kernels(False)
+    assert compiled == []
+    monkeypatch.setattr(ahead, "disk_cached", lambda kernel: kernel in ahead.FIT_KERNELS)
+    assert ahead.compile_ahead(loop=True).child is None
 
 
 def test_an_analysis_ending_early_stops_the_child(monkeypatch: pytest.MonkeyPatch) -> None:
