@@ -173,6 +173,30 @@ def _md(text: str) -> str:
     return _MD_SPECIAL.sub(r"\\\1", printable(text))
 
 
+_SEGMENT_COLUMNS = {
+    "start_frame": "first frame",
+    "stop_frame": "end frame (exclusive)",
+    "frames": "frames",
+    "t_start_s": "start [s]",
+    "t_stop_s": "stop [s]",
+}
+"""Column titles of report.md's segment table (the keys of
+:meth:`imupipe.analysis.condition.Segment.as_dict`; another key is its own title)."""
+
+
+def _number(v: object) -> str:
+    """A float to 10 significant digits (a stamp in s to 10 µs over a day), anything else as is."""
+    return f"{v:.10g}" if isinstance(v, float) else str(v)
+
+
+def _segment_table(segments: list[dict]) -> list[str]:
+    """The analysed segments as a Markdown table, one row each (times from the first frame)."""
+    keys = list(segments[0])
+    rows = [[_SEGMENT_COLUMNS.get(k, k) for k in keys], ["---"] * len(keys)]
+    rows += [[_number(s.get(k)) for k in keys] for s in segments]
+    return ["| " + " | ".join(_md(c) for c in row) + " |" for row in rows]
+
+
 def _fence(text: str, info: str) -> list[str]:
     """A fenced code block whose fence is longer than any backtick run in ``text``
     (CommonMark 4.5), so the text cannot close it."""
@@ -259,8 +283,7 @@ def report_markdown(
     if result.device:
         md += ["Device: " + ", ".join(f"{_md(k)} = {_md(v)}" for k, v in result.device.items()), ""]
     if inp.segments:
-        md += [f"Segments: {len(inp.segments)}", ""]
-        md += [f"- {json.dumps(jsonable(s))}" for s in inp.segments] + [""]
+        md += [f"Segments: {len(inp.segments)}", "", *_segment_table(inp.segments), ""]
     md += ["### Warnings", ""] + ([f"- {_md(w)}" for w in inp.warnings] or ["- none"]) + [""]
     md += [
         "## Noise terms (final model)",

@@ -362,3 +362,19 @@ def test_a_harmonic_line_names_its_fundamental() -> None:
         "evidence": {"its_harmonic": 3, "fundamental_of_hz": 0.0235},
     }
     assert report._kind_text(fundamental) == "narrowband (fundamental of 0.0235 Hz, its harmonic 3)"
+
+
+def test_segments_are_a_table_with_their_frames_and_times() -> None:
+    from imupipe.analysis.condition import Segment
+
+    segments = [Segment(0, 120_000, 0.0, 1199.99), Segment(120_001, 360_000, 1200.01, 3599.99)]
+    r = result()
+    r = replace(r, input=replace(r.input, segments=[s.as_dict() for s in segments]))
+    lines = report_markdown(r, {}).splitlines()
+    at = lines.index("Segments: 2")
+    assert lines[at + 2 : at + 6] == [
+        r"| first frame | end frame (exclusive) | frames | start \[s\] | stop \[s\] |",
+        "| --- | --- | --- | --- | --- |",
+        "| 0 | 120000 | 120000 | 0 | 1199.99 |",
+        "| 120001 | 360000 | 239999 | 1200.01 | 3599.99 |",
+    ]
