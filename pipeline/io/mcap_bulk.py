@@ -209,6 +209,13 @@ class BulkWriter:
         totals.start = start if totals.start is None else min(totals.start, start)
         totals.end = max(totals.end, end)
 
+    def count_messages(self, channel_id: int, messages: int) -> None:
+        """Count in the summary's statistics ``messages`` Message records of ``channel_id``
+        that the caller wrote into the stream itself (raw records)."""
+        per_channel = self._totals.per_channel
+        per_channel[channel_id] = per_channel.get(channel_id, 0) + messages
+        self._totals.message_count += messages
+
     def finish(self) -> None:
         """Write DataEnd, the summary section (as ``mcap.writer.Writer.finish``) and the footer."""
         DataEnd(data_section_crc=0).write(self._builder)

@@ -44,7 +44,7 @@ from isal.isal_zlib import crc32
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, Message, Metadata, Schema, Statistics
 
 from imupipe.errors import InputError, NotMcapError
 from imupipe.io.mcap_walk import (
@@ -71,7 +71,10 @@ MESSAGE_BLOCK = (64 << 10, 4 << 20)
 unchunked file): they are indexed by one compiled walk, not parsed one by one.  The block
 doubles while the messages fill it and falls back to the least when they do not, so a file
 that alternates messages with other records costs no more than reading it."""
-_PARSED = (Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA)
+_PARSED = (
+    Opcode.CHUNK, Opcode.MESSAGE, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA,
+    Opcode.STATISTICS,
+)  # fmt: skip
 _IN_CHUNK = (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA)
 """Records besides messages that a chunk may hold and the scan reads (MCAP spec: a chunk holds
 Schema, Channel and Message records; anything else in it is skipped without a copy)."""
@@ -252,6 +255,12 @@ class ScanReport:
     """Opcode of the record cut by the end of the file (None if its header was cut too)."""
     messages: int = 0
     """Messages of wanted channels yielded."""
+    read_counts: dict[int, int] = field(default_factory=dict)
+    """Messages read per wanted channel id (malformed ones included; 0 for a wanted channel
+    none of whose messages was read)."""
+    stated_counts: dict[int, int] | None = None
+    """Messages per channel id as the file's Statistics record (summary section) states them;
+    None without one."""
     message_records: int = 0
     message_record_bytes: int = 0
     """Message records read in chunks (all channels) and their total size: the mean record size
@@ -304,6 +313,29 @@ class ScanReport:
             out.append(
                 "file has no footer/summary (the writer stopped before finishing): "
                 "every complete chunk was read by a linear scan"
+            )
+        out.extend(self._count_mismatches())
+        return out
+
+    def _count_mismatches(self) -> list[str]:
+        """One sentence per wanted channel whose messages read differ in number from what the
+        file's Statistics record states: the only trace of damage that no other check sees (a
+        record whose opcode was damaged is skipped as an unknown or unread record, a Message
+        whose channel id was damaged belongs to no channel)."""
+        if self.stated_counts is None:
+            return []
+        out = []
+        for cid, read in sorted(self.read_counts.items()):
+            stated = self.stated_counts.get(cid)
+            if stated is None or stated == read:
+                continue
+            topic = self.channels[cid].topic if cid in self.channels else f"channel {cid}"
+            out.append(
+                f"{topic}: {read} of the {stated} messages the file's summary counts were read "
+                f"({stated - read} lost)"
+                if read < stated
+                else f"{topic}: {read} messages read, {read - stated} more than the file's "
+                f"summary counts ({stated}): records repeated, or a summary written before the end"
             )
         return out
 
@@ -450,11 +482,13 @@ class McapScanner:
         schema = self.report.schemas.get(channel.schema_id)
         if self._layout is None:
             self._wanted_ids[channel.id] = bool(self._wanted(channel, schema))
-            return
-        layout = self._layout(channel, schema)
-        self._redefined += self._table.set(channel.id, layout)
-        self._ahead = None
-        self._wanted_ids[channel.id] = layout is not None
+        else:
+            layout = self._layout(channel, schema)
+            self._redefined += self._table.set(channel.id, layout)
+            self._ahead = None
+            self._wanted_ids[channel.id] = layout is not None
+        if self._wanted_ids[channel.id]:
+            self.report.read_counts.setdefault(channel.id, 0)
 
     def runs(self) -> Iterator[MessageRun]:
         """The file's messages as runs of equal payload size, in file order (the payloads are
@@ -623,6 +657,8 @@ class McapScanner:
         elif opcode == Opcode.METADATA:
             meta = _parse(Metadata, body)
             report.metadata[meta.name] = dict(meta.metadata)
+        elif opcode == Opcode.STATISTICS:
+            report.stated_counts = dict(_parse(Statistics, body).channel_message_counts)
         elif opcode == Opcode.MESSAGE:
             if isinstance(body, _Block):
                 yield from self._batches(body.data, body.index)
@@ -671,12 +707,15 @@ class McapScanner:
         if count == 0:
             return
         self.report.messages += count
+        read = self.report.read_counts
         first = int(channel[0])
         if count == len(index) and (channel == first).all():  # one channel: no copies
+            read[first] += count
             yield MessageBatch(first, index.log_time, data, index.offset, index.size)
             return
         for cid in np.unique(channel[wanted]).tolist():
             sel = channel == cid
+            read[cid] += int(np.count_nonzero(sel))
             yield MessageBatch(cid, index.log_time[sel], data, index.offset[sel], index.size[sel])
 
     def _cdr_batches(
@@ -691,6 +730,7 @@ class McapScanner:
                 rows = cdr_rows(data, part, self._table, stop_at_unknown=False)
             for batch in cdr_batches_of(data, part, rows, self._table.channel_ids):
                 self.report.messages += len(batch) + batch.bad
+                self.report.read_counts[batch.channel_id] += len(batch) + batch.bad
                 yield batch
             done += rows.used
             rows = None

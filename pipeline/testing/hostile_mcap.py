@@ -118,8 +118,46 @@ def imu_file(
             w.write_chunk(cid, log, imu_payloads(log, gyro, accel))
         for rec in extra:
             f.write(rec)
+        for cid, count in message_counts(b"".join(extra)).items():
+            w.count_messages(cid, count)  # the summary counts them, as a writer's would
         w.finish()
     return path
+
+
+def message_counts(records: bytes, in_chunk: bool = False) -> dict[int, int]:
+    """Message records per channel id among raw ``records``: top-level ones and those in
+    top-level chunks (not in chunks nested in them, which the spec forbids and readers skip);
+    the walk stops at a record that runs past the end."""
+    counts: dict[int, int] = {}
+    at = 0
+    while at + 9 <= len(records):
+        opcode, length = struct.unpack_from("<BQ", records, at)
+        body = records[at + 9 : at + 9 + length]
+        if len(body) < length:
+            break
+        if opcode == Opcode.MESSAGE and length >= 2:
+            cid = struct.unpack_from("<H", body)[0]
+            counts[cid] = counts.get(cid, 0) + 1
+        elif opcode == Opcode.CHUNK and not in_chunk:
+            for cid, n in message_counts(_chunk_records(body), in_chunk=True).items():
+                counts[cid] = counts.get(cid, 0) + n
+        at += 9 + length
+    return counts
+
+
+def _chunk_records(body: bytes) -> bytes:
+    """The records a Chunk record's ``body`` holds, decompressed (b"" if it cannot be)."""
+    (name_length,) = struct.unpack_from("<I", body, 28)
+    compression = body[32 : 32 + name_length].decode()
+    data = body[32 + name_length + 8 :]
+    try:
+        if compression == "zstd":
+            return zstandard.ZstdDecompressor().decompress(data, max_output_size=1 << 26)
+        if compression == "lz4":
+            return lz4.frame.decompress(data)
+    except (zstandard.ZstdError, RuntimeError):
+        return b""
+    return data if compression == "" else b""
 
 
 def imu_message_records(channel_id: int, n: int, rate_hz: float = 100.0) -> bytes:

@@ -76,16 +76,33 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("fuzz")
 
 
-def only_clean_errors(work: Path, data: bytes, kind: str) -> None:
-    """Decode and describe ``data``; anything but success or ImupipeError fails the test."""
+def only_clean_errors(work: Path, data: bytes, kind: str, intact: bytes | None = None) -> None:
+    """Decode and describe ``data``; anything but success or ImupipeError fails the test.  With
+    ``intact`` (the file before the damage, every chunk CRC-checked): a decode whose frames
+    differ from the intact file's must also warn — damage is never silently read as data."""
     path = work / "fuzz.mcap"
     path.write_bytes(data)
     for stage in (decode, describe):
         try:
-            stage(path)
+            out = stage(path)
         except ImupipeError as exc:
             assert "\n" not in str(exc)
+        else:
+            if stage is decode and intact is not None and not out.warnings:
+                assert out.frames.equals(intact_frames(intact, work), null_equal=True)
     RAN[kind] += 1
+
+
+_INTACT: dict[bytes, object] = {}
+
+
+def intact_frames(data: bytes, work: Path) -> object:
+    """The decoded frame of an undamaged file (computed once per file)."""
+    if data not in _INTACT:
+        path = work / "intact.mcap"
+        path.write_bytes(data)
+        _INTACT[data] = decode(path).frames
+    return _INTACT[data]
 
 
 def report_count(kind: str) -> None:
@@ -124,7 +141,7 @@ def test_bit_flips_in_the_data_section(
     buf = bytearray(data)
     for where, bit in flips:
         buf[start + int(where * (len(buf) - start))] ^= 1 << bit
-    only_clean_errors(work, bytes(buf), "bit flip")
+    only_clean_errors(work, bytes(buf), "bit flip", intact=data)
 
 
 def test_bit_flip_count() -> None:
@@ -138,7 +155,7 @@ def test_random_bytes_overwrite_the_data_section(
 ) -> None:
     data, start = FILES[comp]
     at = start + int(where * (len(data) - start))
-    only_clean_errors(work, data[:at] + junk + data[at + len(junk) :], "overwrite")
+    only_clean_errors(work, data[:at] + junk + data[at + len(junk) :], "overwrite", intact=data)
 
 
 def test_overwrite_count() -> None:

@@ -302,3 +302,67 @@ def test_info_shows_a_long_or_multiline_metadata_value_by_its_first_line_and_len
         f"  metadata adis16364: serial=42, note={'a' * METADATA_SHOWN} … "
         f"({METADATA_SHOWN + 1} characters), exact={'b' * METADATA_SHOWN}",
     ]
+
+
+def test_a_chunk_whose_opcode_is_damaged_is_counted_lost_from_the_summary(tmp_path: Path) -> None:
+    """A flipped bit turning a Chunk record (0x06) into a MessageIndex (0x07) makes the scan
+    skip it as a record it need not read; only the file's Statistics record shows the loss, and
+    the warning gives it to the message."""
+    from mcap.records import Opcode
+
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    extra = (hm.chunk(hm.imu_message_records(1, 40), ""),)
+    path = hm.imu_file(tmp_path / "x.mcap", extra=extra)
+    data = bytearray(path.read_bytes())
+    at = data.index(extra[0])
+    assert data[at] == Opcode.CHUNK
+    data[at] ^= 1
+    path.write_bytes(bytes(data))
+    rec = decode(path)
+    assert rec.frames.height == 3000
+    assert rec.warnings == [
+        "/imu/data: 3000 of the 3040 messages the file's summary counts were read (40 lost)"
+    ]
+
+
+def test_a_message_whose_channel_is_damaged_is_counted_lost(tmp_path: Path) -> None:
+    """An unchunked Message record whose channel id was damaged belongs to no channel: it is
+    not read, and the summary's count says one message is missing."""
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    extra = (hm.imu_message_records(1, 3),)
+    path = hm.imu_file(tmp_path / "x.mcap", extra=extra)
+    data = bytearray(path.read_bytes())
+    at = data.index(extra[0]) + 9  # the first message's channel id
+    data[at : at + 2] = b"\xff\xff"
+    path.write_bytes(bytes(data))
+    rec = decode(path)
+    assert rec.frames.height == 3002
+    assert rec.warnings == [
+        "/imu/data: 3002 of the 3003 messages the file's summary counts were read (1 lost)"
+    ]
+
+
+def test_more_messages_than_the_summary_counts_are_read_and_warned_about(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Messages the summary does not count (records repeated, or appended after it was
+    written) are read, and the warning says how many more there are."""
+    from imupipe.io.decode import decode
+    from imupipe.io.mcap_bulk import BulkWriter
+    from imupipe.testing import hostile_mcap as hm
+
+    count = BulkWriter.count_messages
+    monkeypatch.setattr(  # a summary that misses two of the five raw messages
+        BulkWriter, "count_messages", lambda self, cid, n: count(self, cid, n - 2)
+    )
+    path = hm.imu_file(tmp_path / "x.mcap", extra=(hm.imu_message_records(1, 5),))
+    rec = decode(path)
+    assert rec.frames.height == 3005
+    assert rec.warnings == [
+        "/imu/data: 3005 messages read, 2 more than the file's summary counts (3003): records "
+        "repeated, or a summary written before the end"
+    ]
