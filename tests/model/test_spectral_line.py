@@ -5,6 +5,7 @@ bin's tone interval (effects.psd_line) does not."""
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from scipy import integrate, signal
 
 from imupipe.model import effects, ieee952, spectral_line
 
+TESTS_DATA = Path(__file__).parents[1] / "data"
 TAU0, N = 0.1, 2**16
 F0, WIDTH = 0.5, 0.01  # Hz: a line 65 bins wide
 
@@ -224,3 +226,31 @@ def test_an_unresolved_centre_is_censored_at_its_span_and_at_0_hz(f0, seed, floo
     else:
         assert c.lo == pytest.approx(c.frequency_hz - span, rel=1e-12)
         assert c.lo > 0.0
+
+
+def stopped_short() -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """A band where Nelder–Mead stops far short of the width minimum (tests/data, from a
+    damaged busy bag of 60 s at 200 Hz in SQLite storage: a 57 Hz candidate whose first fit's
+    width, 0.017 Hz, is half a bin)."""
+    d = np.load(TESTS_DATA / "line_centre_stopped_short.npz")
+    return d["freqs"], d["power"], float(d["seed_hz"]), d["widths"]
+
+
+def test_a_fit_stopped_short_of_the_width_is_restarted_inside_its_own_intervals(monkeypatch):
+    freqs, power, seed_hz, widths = stopped_short()
+    c = spectral_line.line_centre(freqs, power, seed_hz, widths)
+    lo, hi = c.width_interval
+    assert lo < c.width_hz < hi and c.lo < c.frequency_hz < c.hi
+    assert c.width_hz == pytest.approx(0.126135, rel=1e-5)  # not the first stop, 0.0169 Hz
+    assert c.frequency_hz == pytest.approx(57.37967, rel=1e-6)
+    # without the restart the estimate lay outside its own width interval, whose root finder
+    # then had no sign change: `imupipe analyze` ended in an internal error
+    monkeypatch.setattr(spectral_line, "REFIT_DEVIANCE", np.inf)
+    first = spectral_line.line_centre(freqs, power, seed_hz, widths)
+    assert first.width_hz == pytest.approx(0.016908, rel=1e-4)
+    with pytest.raises(ValueError, match="different signs"):
+        first.width_interval  # noqa: B018
+    # a fit whose deviance still falls after every restart has no line
+    monkeypatch.setattr(spectral_line, "REFIT_DEVIANCE", 1.0)
+    monkeypatch.setattr(spectral_line, "MAX_REFITS", 1)
+    assert spectral_line.line_centre(freqs, power, seed_hz, widths) is None
