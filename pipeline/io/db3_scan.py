@@ -17,7 +17,7 @@ message``) are inflated here; whole compressed files are inflated before
 The file is opened read-only; its strings (topic names, types) reach the outputs escaped like an
 MCAP file's.  A payload longer than ``max_chunk_bytes``, or one that is no blob (SQLite's types
 are the writer's choice) or does not inflate, is not read (counted as damage), and a database
-that turns out damaged part way keeps every message read before, with a warning.
+damaged part way is read on both sides of the damage, with a warning naming the messages lost.
 """
 
 from __future__ import annotations
@@ -84,12 +84,11 @@ class Db3Report:
     skipped: int = 0
     """Messages of wanted topics not read: longer than ``max_chunk_bytes``, or whose payload is
     no blob (or, compressed per message, no zstd frame) or whose timestamp no integer."""
-    broken_after: int | None = None
-    """The last message (rowid) read before the database failed to read further (None: read to
-    its end)."""
+    lost: list[tuple[int, int | None, str]] = field(default_factory=list)
+    """Stretches of messages the database failed to read: (the last message (rowid) read before,
+    the last one lost (None: every one after it), SQLite's reason)."""
     last_row: int = 0
     """The database's last message (rowid; 0 if its last page cannot be read)."""
-    broken_reason: str = ""
 
     def damage(self) -> list[str]:
         """One human sentence per kind of damage (empty for an intact database)."""
@@ -99,17 +98,25 @@ class Db3Report:
                 f"{self.skipped} message(s) skipped unread (larger than the memory budget "
                 "allows, or no readable binary payload with an integer timestamp)"
             )
-        if self.broken_after is not None:
-            lost = (
-                f"the last {100 * (1 - self.broken_after / self.last_row):.1f} % of the messages"
-                if self.last_row >= self.broken_after
-                else "the messages after it (the last page is cut off: how many is unknown)"
-            )
-            out.append(
-                f"database damaged ({self.broken_reason}): read up to message "
-                f"{self.broken_after}; {lost} could not be read"
-            )
+        for before, until, reason in self.lost:
+            out.append(f"database damaged ({reason}): " + self._stretch(before, until))
         return out
+
+    def _stretch(self, before: int, until: int | None) -> str:
+        """What a lost stretch of messages after ``before`` (up to ``until``) was."""
+        if until is not None:
+            of = (
+                f" of {self.last_row} ({100 * (until - before) / self.last_row:.1f} %, all topics)"
+                if self.last_row
+                else " (all topics)"
+            )
+            return f"messages {before + 1}–{until}{of} could not be read; read on after them"
+        lost = (
+            f"the last {100 * (1 - before / self.last_row):.1f} % of the messages"
+            if self.last_row >= before
+            else "the messages after it (the last page cannot be read: how many is unknown)"
+        )
+        return f"read up to message {before}; {lost} could not be read"
 
 
 class Db3Scanner:
@@ -193,37 +200,91 @@ class Db3Scanner:
     def _blocks(self, ids: list[int]) -> Iterator[tuple[np.ndarray, MessageIndex]]:
         """The messages of topics ``ids`` as (their payloads joined, a :class:`MessageIndex`
         into them), :data:`BLOCK_ROWS` at a time in ``rowid`` order; the database is closed
-        when the last block is read.
+        when the last block is read.  Where a fetch fails (a page SQLite cannot parse: a bad
+        sector, a partial copy), the messages before the damage are read one at a time, reading
+        resumes at the first readable message after it (:meth:`_next_readable`), and the
+        stretch in between is reported lost.
 
         Raises:
             InputError: the database cannot be read at all."""
         readable = "typeof(data) = 'blob' AND length(data) <= ? AND typeof(timestamp) = 'integer'"
+        query = (
+            f"SELECT rowid, topic_id, timestamp, CASE WHEN {readable} THEN data END FROM messages "
+            f"WHERE rowid > ? AND topic_id IN ({','.join(map(str, ids))}) ORDER BY rowid"
+        )
         block: list[tuple] = []
-        last = 0  # rowid of the last message read
+        after = 0  # rowid of the last message read, or of the last one lost
         try:
-            if not ids:
-                return
-            cursor = self._db.execute(
-                f"SELECT rowid, topic_id, timestamp, CASE WHEN {readable} THEN data END "
-                f"FROM messages WHERE topic_id IN ({','.join(map(str, ids))}) ORDER BY rowid",
-                (self._max_bytes,),
-            )
-            while rows := cursor.fetchmany(FETCH_ROWS):
-                block += rows
-                last = rows[-1][0]
-                if len(block) >= BLOCK_ROWS:
-                    yield from self._kept(block)
-                    block = []
-                    self._progress(
-                        int(self.report.file_bytes * last / max(self.report.last_row, 1))
-                    )
-        except sqlite3.DatabaseError as exc:
-            if not last:
-                raise InputError(f"{self.path}: not a readable rosbag2 database ({exc})") from exc
-            self.report.broken_after, self.report.broken_reason = last, str(exc)
+            while ids:
+                try:
+                    cursor = self._db.execute(query, (self._max_bytes, after))
+                    while rows := cursor.fetchmany(FETCH_ROWS):
+                        block += rows
+                        after = rows[-1][0]
+                        if len(block) >= BLOCK_ROWS:
+                            yield from self._kept(block)
+                            block = []
+                            self._progress(
+                                int(self.report.file_bytes * after / max(self.report.last_row, 1))
+                            )
+                    break
+                except sqlite3.DatabaseError as exc:
+                    salvaged, failed = self._one_by_one(query, after)
+                    block += salvaged
+                    after = salvaged[-1][0] if salvaged else after
+                    if not failed:  # the rows the failed fetch held all read: go on
+                        continue
+                    resume = self._next_readable(query, after)
+                    if resume is None and not after:
+                        raise InputError(
+                            f"{self.path}: not a readable rosbag2 database ({exc})"
+                        ) from exc
+                    self.report.lost.append((after, resume, str(exc)))
+                    if resume is None:
+                        break
+                    after = resume
         finally:
             self._db.close()
         yield from self._kept(block)
+
+    def _first_rows(self, query: str, after: int) -> list[tuple] | None:
+        """The first row of ``query`` after message ``after``, if any (None: SQLite failed)."""
+        try:
+            return self._db.execute(query, (self._max_bytes, after)).fetchmany(1)
+        except sqlite3.DatabaseError:
+            return None
+
+    def _one_by_one(self, query: str, after: int) -> tuple[list[tuple], bool]:
+        """The rows of ``query`` after message ``after`` up to the first that fails to read (at
+        most :data:`FETCH_ROWS`: those a failed fetch held), and whether one failed."""
+        rows: list[tuple] = []
+        try:
+            cursor = self._db.execute(query, (self._max_bytes, after))
+            while len(rows) < FETCH_ROWS and (row := cursor.fetchone()) is not None:
+                rows.append(row)
+        except sqlite3.DatabaseError:
+            return rows, True
+        return rows, False
+
+    def _next_readable(self, query: str, after: int) -> int | None:
+        """The smallest rowid r > ``after`` from which ``query`` reads (its rows after r; the
+        messages after ``after`` up to r are lost), found by doubling the distance and then
+        bisecting; None when none up to 2⁶² does, or none is left after r (every message after
+        ``after`` is lost)."""
+        step, failed = 1, after
+        while self._first_rows(query, failed + step) is None:
+            failed += step
+            step *= 2
+            if failed + step > 1 << 62:
+                return None
+        ok = failed + step
+        while ok - failed > 1:  # the first read beyond one damaged stretch
+            mid = (failed + ok) // 2
+            if self._first_rows(query, mid) is None:
+                failed = mid
+            else:
+                ok = mid
+        return ok if self._first_rows(query, ok) else None  # no message after it: all lost
 
     def _inflated(
         self, kept: list[tuple], payloads: list[bytes]

@@ -6,6 +6,7 @@ same frame; hostile databases give one clear error or what can be recovered, wit
 
 from __future__ import annotations
 
+import re
 import shutil
 import sqlite3
 import tempfile
@@ -152,12 +153,14 @@ def test_a_directory_without_storage_files_says_which_it_looked_for(tmp_path: Pa
         decode(tmp_path)
 
 
-def test_a_database_damaged_part_way_keeps_what_precedes_the_damage(
+def test_a_database_damaged_part_way_is_read_on_both_sides_of_the_damage(
     tmp_path: Path, monkeypatch
 ) -> None:
     """Pages overwritten half way through (a bad sector, a partial copy): the messages before
-    them decode, and the warning says where reading stopped and how much of the database that
-    leaves unread.  (A file cut short is refused whole: SQLite opens no table of it.)"""
+    them decode, those before the damage in the fetch that failed included, reading resumes at
+    the first readable message after them, and the warning names the messages lost.  (Until
+    session 35 everything after the damage was lost: here half the recording.)  A file cut
+    short is refused whole: SQLite opens no table of it."""
     monkeypatch.setattr(db3_scan, "FETCH_ROWS", 64)
     monkeypatch.setattr(db3_scan, "BLOCK_ROWS", 256)
     db3 = write_rosbag2_db3(tmp_path / "bag", [imu_stream(TOPICS[0], 10.0, 200, seed=4)])
@@ -167,20 +170,44 @@ def test_a_database_damaged_part_way_keeps_what_precedes_the_damage(
         f.seek(size // 2 // 4096 * 4096)
         f.write(np.random.default_rng(0).integers(0, 256, 4 * 4096, np.uint8).tobytes())
     rec = decode(db3)
-    n = rec.frames.height
-    assert 256 < n < len(stamps) == 2000
-    assert n % 64 == 0  # whole fetches before the one that failed
-    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps[:n])
+    read = rec.frames["stamp_ns"].to_numpy()
     (warning,) = rec.warnings
-    lost = 100 * (1 - n / len(stamps))
+    first, last = (int(m) for m in re.search(r"messages (\d+)–(\d+) of 2000", warning).groups())
+    assert (first, last) == (968, 1002)  # four pages of ~9 messages
     assert warning == (
-        f"database damaged (database disk image is malformed): read up to message {n}; the "
-        f"last {lost:.1f} % of the messages could not be read"
+        "database damaged (database disk image is malformed): messages 968–1002 of 2000 (1.8 %, "
+        "all topics) could not be read; read on after them"
     )
+    np.testing.assert_array_equal(read, np.concatenate([stamps[: first - 1], stamps[last:]]))
     cut = tmp_path / "cut.db3"
     cut.write_bytes(db3.read_bytes()[: size // 2])
     with pytest.raises(InputError, match=r"cut\.db3: not a readable rosbag2 database \(database"):
         decode(cut)
+
+
+def test_a_database_whose_last_pages_are_damaged_keeps_what_precedes_them(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """Damage that reaches the last message leaves nothing to resume at: the messages before it
+    decode and the warning says which share of the database is lost."""
+    monkeypatch.setattr(db3_scan, "FETCH_ROWS", 64)
+    db3 = write_rosbag2_db3(tmp_path / "bag", [imu_stream(TOPICS[0], 10.0, 200, seed=4)])
+    stamps, _ = rosbags_imu(tmp_path / "bag", TOPICS[0])
+    with sqlite3.connect(db3) as db:  # the messages' table's pages, in order
+        pages = [p for (p,) in db.execute("SELECT pageno FROM dbstat WHERE name = 'messages'")]
+    page_size = 4096
+    with open(db3, "r+b") as f:
+        for page in pages[-len(pages) // 4 :]:  # its last quarter
+            f.seek((page - 1) * page_size)
+            f.write(bytes([0xFF]) * page_size)
+    rec = decode(db3)
+    n = rec.frames.height
+    assert 1000 < n < 2000
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps[:n])
+    assert rec.warnings == [
+        f"database damaged (database disk image is malformed): read up to message {n}; the "
+        "messages after it (the last page cannot be read: how many is unknown) could not be read"
+    ]
 
 
 def _compressed_bag(bag: Path, storage: str, mode: str) -> tuple[Stream, Path]:
