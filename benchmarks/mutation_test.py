@@ -81,6 +81,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_hostile.py",  # damaged and hostile files (~25 s)
         "tests/test_odd_inputs.py",
     ),
+    "pipeline/io/db3_scan.py": ("tests/io/test_db3_bags.py",),
     "pipeline/io/decode.py": (
         "tests/io/test_decode_contract.py",
         "tests/io/test_scale_factors.py",
