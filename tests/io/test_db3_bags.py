@@ -283,3 +283,35 @@ def test_a_message_that_does_not_inflate_is_skipped_and_counted(tmp_path: Path) 
         "1 message(s) skipped unread (larger than the memory budget allows, or no readable "
         "binary payload with an integer timestamp)"
     ]
+
+
+def test_the_lost_stretches_are_worded_with_their_share_of_the_database() -> None:
+    report = db3_scan.Db3Report(last_row=2000)
+    report.lost = [(967, 1002, "malformed"), (1500, None, "malformed")]
+    assert report.damage() == [
+        "database damaged (malformed): messages 968–1002 of 2000 (1.8 %, all topics) could not "
+        "be read; read on after them",
+        "database damaged (malformed): read up to message 1500; the last 25.0 % of the messages "
+        "could not be read",
+    ]
+    report.last_row = 0  # the last page unreadable: the total is unknown
+    assert report.damage()[0] == (
+        "database damaged (malformed): messages 968–1002 (all topics) could not be read; read on "
+        "after them"
+    )
+
+
+def test_the_progress_of_a_database_read_rises_to_its_size(
+    tmp_path: Path, db3_bag: Path, monkeypatch
+) -> None:
+    """Reported after each full block, in bytes of the file as the share of messages read
+    (rowid / the last rowid): never beyond the file, never backwards, the last full block's
+    past 80 % of it."""
+    monkeypatch.setattr(db3_scan, "FETCH_ROWS", 32)
+    monkeypatch.setattr(db3_scan, "BLOCK_ROWS", 128)
+    seen: list[int] = []
+    decode(db3_bag, topic=TOPICS[1], progress=seen.append)
+    size = sum(f.stat().st_size for f in db3_bag.glob("*.db3"))
+    assert len(seen) >= 5
+    assert seen == sorted(seen) and 0 < seen[0] and seen[-1] <= size
+    assert seen[-1] > 0.8 * size
