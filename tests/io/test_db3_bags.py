@@ -200,9 +200,12 @@ def test_a_database_whose_last_pages_are_damaged_keeps_what_precedes_them(
         for page in pages[-len(pages) // 4 :]:  # its last quarter
             f.seek((page - 1) * page_size)
             f.write(bytes([0xFF]) * page_size)
-    rec = decode(db3)
+    monkeypatch.setattr(db3_scan, "BLOCK_ROWS", 256)
+    seen: list[int] = []  # the total unknown: progress against 1 row, never a division by 0
+    rec = decode(db3, progress=seen.append)
     n = rec.frames.height
     assert 1000 < n < 2000
+    assert seen and all(v > 0 for v in seen)
     np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps[:n])
     assert rec.warnings == [
         f"database damaged (database disk image is malformed): read up to message {n}; the "
@@ -315,3 +318,24 @@ def test_the_progress_of_a_database_read_rises_to_its_size(
     assert len(seen) >= 5
     assert seen == sorted(seen) and 0 < seen[0] and seen[-1] <= size
     assert seen[-1] > 0.8 * size
+
+
+def test_a_database_whose_first_page_of_messages_is_damaged_is_read_after_it(
+    tmp_path: Path,
+) -> None:
+    """Nothing read before the damage is no reason to refuse the rest: reading starts at the
+    first readable message after it."""
+    db3 = write_rosbag2_db3(tmp_path / "bag", [imu_stream(TOPICS[0], 10.0, 200, seed=4)])
+    stamps, _ = rosbags_imu(tmp_path / "bag", TOPICS[0])
+    with sqlite3.connect(db3) as db:  # the messages table's first leaf
+        (page,) = db.execute(
+            "SELECT min(pageno) FROM dbstat WHERE name = 'messages' AND pagetype = 'leaf'"
+        ).fetchone()
+    with open(db3, "r+b") as f:
+        f.seek((page - 1) * 4096)
+        f.write(bytes([0xFF]) * 4096)
+    rec = decode(db3)
+    (warning,) = rec.warnings
+    last = int(re.search(r"messages 1–(\d+) of 2000", warning).group(1))
+    assert 0 < last < 20  # one page of ~9 messages
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps[last:])
