@@ -329,7 +329,7 @@ class ScanReport:
             stated = self.stated_counts.get(cid)
             if stated is None or stated == read:
                 continue
-            topic = self.channels[cid].topic if cid in self.channels else f"channel {cid}"
+            topic = self.channels[cid].topic  # counted channels are declared ones
             out.append(
                 f"{topic}: {read} of the {stated} messages the file's summary counts were read "
                 f"({stated - read} lost)"
