@@ -619,7 +619,10 @@ def _masked_series(
     grid would be excluded."""
     place, uncertain = _grid_places(t, counter, period)
     usable_row = ~(bad_row | uncertain)
-    excluded = np.ones(int(place[-1]) + 1, dtype=bool)
+    grid = int(place[-1]) + 1
+    if grid - int(usable_row.sum()) > MAX_MASKED_FRACTION * grid:  # told before allocating it:
+        return None  # one damaged stamp 2³² s late asks for a grid of 10¹¹ samples and more
+    excluded = np.ones(grid, dtype=bool)
     excluded[place[usable_row]] = False
     n_excluded = int(excluded.sum())
     if n_excluded > MAX_MASKED_FRACTION * len(excluded) or usable_row.sum() < 2:

@@ -346,6 +346,27 @@ def test_mask_policy_falls_back_when_most_of_the_grid_is_a_gap() -> None:
     assert any("more than 50 % of the sample grid" in w for w in s.warnings)
 
 
+@pytest.mark.parametrize("policy", ["mask", "auto"])
+def test_a_stamp_damaged_into_the_far_future_allocates_no_grid_for_it(policy, monkeypatch):
+    """A flipped high bit in one stamp (found fuzzing a SQLite bag: a grid of 6.7e9 samples,
+    6.25 GiB, and `internal error: MemoryError`): the grid would be almost all gap, so the
+    longest segment is analysed, and no array of the grid's size is ever made."""
+
+    def damaged(a):
+        a[-1] += 1 << 62  # ns: 146 years late
+
+    ones = np.ones
+
+    def small_only(shape, *args, **kwargs):
+        assert np.prod(shape) < 10**6, shape
+        return ones(shape, *args, **kwargs)
+
+    monkeypatch.setattr(np, "ones", small_only)
+    s = condition(recording(stamp_ns=damaged), gaps=policy)
+    assert s.excluded is None and s.segment.frames == 999
+    assert any("more than 50 % of the sample grid" in w for w in s.warnings)
+
+
 def test_mask_policy_duplicate_stamp_row_is_excluded_not_shifted() -> None:
     def dup(a):
         a[100] = a[99]
