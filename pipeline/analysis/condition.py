@@ -620,8 +620,8 @@ def _masked_series(
     place, uncertain = _grid_places(t, counter, period)
     usable_row = ~(bad_row | uncertain)
     grid = int(place[-1]) + 1
-    if grid - int(usable_row.sum()) > MAX_MASKED_FRACTION * grid:  # told before allocating it:
-        return None  # one damaged stamp 2³² s late asks for a grid of 10¹¹ samples and more
+    if grid - int(usable_row.sum()) > MAX_MASKED_FRACTION * grid:  # told before allocating:
+        return None  # a stamp damaged into the far future asks for billions of grid samples
     excluded = np.ones(grid, dtype=bool)
     excluded[place[usable_row]] = False
     n_excluded = int(excluded.sum())

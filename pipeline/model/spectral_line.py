@@ -168,7 +168,7 @@ def line_centre(
     def joint(p: np.ndarray) -> float:  # (centre offset in units of w1, ln(width / w1))
         return fine.deviance(c1 + p[0] * w1, w1 * np.exp(p[1]))
 
-    def widest(c: float, w: float) -> optimize.OptimizeResult:  # the best width at c near w
+    def best_width(c: float, w: float) -> optimize.OptimizeResult:  # at centre c, near w
         return optimize.minimize_scalar(
             lambda lw: fine.deviance(c, w * np.exp(lw)),
             bounds=(-np.log(WIDTH_SPAN), np.log(WIDTH_SPAN)),
@@ -181,7 +181,7 @@ def line_centre(
         start = optimize.minimize(joint, x0, method="Nelder-Mead",
                                   options={"xatol": 1e-3, "fatol": 1e-4})  # fmt: skip
         c_hat, w_hat = c1 + start.x[0] * w1, w1 * float(np.exp(start.x[1]))
-        at_centre = widest(c_hat, w_hat)
+        at_centre = best_width(c_hat, w_hat)
         if at_centre.fun > start.fun - REFIT_DEVIANCE:
             break
         x0 = start.x + np.array([0.0, at_centre.x])  # Nelder–Mead stopped short of the width
@@ -189,7 +189,7 @@ def line_centre(
         return None  # the deviance still falls at ever wider widths: no line to centre
 
     def profile(c: float) -> float:  # min over the width of the deviance at centre c
-        res = at_centre if c == c_hat else widest(c, w_hat)
+        res = at_centre if c == c_hat else best_width(c, w_hat)
         return min(float(res.fun), fine.deviance(c, w_hat))
 
     d_min = min(profile(c_hat), float(start.fun))
