@@ -272,7 +272,7 @@ class Db3Scanner:
         bisecting; None when none up to 2⁶² does, or none is left after r (every message after
         ``after`` is lost)."""
         step, failed = 1, after
-        while self._first_rows(query, failed + step) is None:
+        while (first := self._first_rows(query, failed + step)) is None:
             failed += step
             step *= 2
             if failed + step > 1 << 62:
@@ -280,11 +280,11 @@ class Db3Scanner:
         ok = failed + step
         while ok - failed > 1:  # the first read beyond one damaged stretch
             mid = (failed + ok) // 2
-            if self._first_rows(query, mid) is None:
+            if (rows := self._first_rows(query, mid)) is None:
                 failed = mid
             else:
-                ok = mid
-        return ok if self._first_rows(query, ok) else None  # no message after it: all lost
+                ok, first = mid, rows
+        return ok if first else None  # no message after it: all lost
 
     def _inflated(
         self, kept: list[tuple], payloads: list[bytes]

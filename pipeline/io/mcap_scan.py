@@ -253,8 +253,6 @@ class ScanReport:
     """Bytes at the end of the file that did not form a complete record."""
     truncated_opcode: int | None = None
     """Opcode of the record cut by the end of the file (None if its header was cut too)."""
-    messages: int = 0
-    """Messages of wanted channels yielded."""
     read_counts: dict[int, int] = field(default_factory=dict)
     """Messages read per wanted channel id (malformed ones included; 0 for a wanted channel
     none of whose messages was read)."""
@@ -268,6 +266,11 @@ class ScanReport:
 
     max_chunk_bytes: int = MAX_CHUNK_BYTES
     """Chunks declaring more uncompressed bytes were skipped unread: their size is not trusted."""
+
+    @property
+    def messages(self) -> int:
+        """Messages of wanted channels yielded."""
+        return sum(self.read_counts.values())
 
     def lost_messages_estimate(self, chunk: LostChunk) -> int | None:
         """Messages a lost chunk held ≈ its uncompressed size / the mean message record size
@@ -706,7 +709,6 @@ class McapScanner:
         count = int(np.count_nonzero(wanted))
         if count == 0:
             return
-        self.report.messages += count
         read = self.report.read_counts
         first = int(channel[0])
         if count == len(index) and (channel == first).all():  # one channel: no copies
@@ -729,7 +731,6 @@ class McapScanner:
             if rows is None:
                 rows = cdr_rows(data, part, self._table, stop_at_unknown=False)
             for batch in cdr_batches_of(data, part, rows, self._table.channel_ids):
-                self.report.messages += len(batch) + batch.bad
                 self.report.read_counts[batch.channel_id] += len(batch) + batch.bad
                 yield batch
             done += rows.used

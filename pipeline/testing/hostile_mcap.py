@@ -8,6 +8,7 @@ compression (u32 length + bytes), records (u64 length + bytes)``.
 
 from __future__ import annotations
 
+import io
 import struct
 import zlib
 from pathlib import Path
@@ -15,7 +16,9 @@ from pathlib import Path
 import lz4.frame
 import numpy as np
 import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
+from mcap.records import Chunk
 
 from imupipe.io.decode import IMU_SCHEMA
 from imupipe.io.mcap_bulk import BulkWriter
@@ -147,17 +150,15 @@ def message_counts(records: bytes, in_chunk: bool = False) -> dict[int, int]:
 
 def _chunk_records(body: bytes) -> bytes:
     """The records a Chunk record's ``body`` holds, decompressed (b"" if it cannot be)."""
-    (name_length,) = struct.unpack_from("<I", body, 28)
-    compression = body[32 : 32 + name_length].decode()
-    data = body[32 + name_length + 8 :]
+    chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
     try:
-        if compression == "zstd":
-            return zstandard.ZstdDecompressor().decompress(data, max_output_size=1 << 26)
-        if compression == "lz4":
-            return lz4.frame.decompress(data)
+        if chunk.compression == "zstd":
+            return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=1 << 26)
+        if chunk.compression == "lz4":
+            return lz4.frame.decompress(chunk.data)
     except (zstandard.ZstdError, RuntimeError):
         return b""
-    return data if compression == "" else b""
+    return chunk.data if chunk.compression == "" else b""
 
 
 def imu_message_records(channel_id: int, n: int, rate_hz: float = 100.0) -> bytes:
