@@ -19,6 +19,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from imupipe.fleet.curves import UNIT_COLUMN
+from imupipe.report.rerun_streams import open_stream, release_closed_streams, send_blueprint
 from imupipe.report.rerun_view import _log10, _strip, decade_grid, log_extent
 from imupipe.vocab import AXES
 
@@ -75,7 +76,7 @@ def write_fleet_rrd(fleet: pl.DataFrame, pop: pl.DataFrame, path: Path) -> Path 
     axes = [a for a in AXES if a in set(fleet["axis"].unique())]
     if not axes:
         return None
-    rec = rr.RecordingStream("imupipe_fleet", make_default=False, make_thread_default=False)
+    rec = open_stream("imupipe_fleet")
     rec.save(path)
     for axis in axes:
         _log_axis(
@@ -87,11 +88,9 @@ def write_fleet_rrd(fleet: pl.DataFrame, pop: pl.DataFrame, path: Path) -> Path 
     views = [
         rrb.Spatial2DView(origin=f"allan/{a}", name=f"{a}: log10 ADEV vs log10 τ") for a in axes
     ]
-    rec.send_blueprint(
-        rrb.Blueprint(rrb.Tabs(*views), collapse_panels=True, auto_views=False),
-        make_active=True,
-        make_default=True,
-    )
+    send_blueprint(rec, rrb.Blueprint(rrb.Tabs(*views), collapse_panels=True, auto_views=False))
     rec.flush()
     rec.disconnect()
+    del rec
+    release_closed_streams()
     return path

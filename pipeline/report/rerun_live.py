@@ -30,6 +30,7 @@ from imupipe.device import adis16364 as adis
 from imupipe.device.adis16364 import FrameBlock
 from imupipe.io.decode import _adis_frame
 from imupipe.recording.recorder import FrameSource
+from imupipe.report.rerun_streams import open_stream, send_blueprint
 from imupipe.report.rerun_view import (
     SENSORS,
     SIGNAL_PLOTS,
@@ -117,7 +118,7 @@ class LiveView:
         }
         log_series_styles(self._rec, columns, self._offsets, ", first block")
         self._rec.flush()
-        self._rec.send_blueprint(blueprint(None, list(columns)))
+        send_blueprint(self._rec, blueprint(None, list(columns)))
 
     def frames(self, n: int) -> FrameBlock:
         """``n`` frames from the wrapped source, streamed before they are returned."""
@@ -184,6 +185,6 @@ class LiveView:
 def open_live_view(source: FrameSource, mode: Literal["view", "serve"], port: int) -> LiveView:
     """Start the viewer process (:func:`start_viewer`) and wrap ``source`` to stream to it."""
     start_viewer(mode, port)
-    rec = rr.RecordingStream("imupipe", make_default=False, make_thread_default=False)
+    rec = open_stream("imupipe")
     rec.connect_grpc(viewer_url(port))
     return LiveView(source, rec)

@@ -49,6 +49,7 @@ from imupipe.report.report import (
     default_datasheet,
     is_adis16364,
 )
+from imupipe.report.rerun_streams import open_stream, release_closed_streams, send_blueprint
 from imupipe.units import PAPER_UNIT, SI_UNIT, from_si
 from imupipe.vocab import ACCEL_AXES, GYRO_AXES
 
@@ -628,13 +629,11 @@ class RrdWriter:
         )
         means = _means(frames, columns)
         self._floors = _floors(frames, columns, means)
-        self._rec = rec = rr.RecordingStream(
-            "imupipe", make_default=False, make_thread_default=False
-        )
+        self._rec = rec = open_stream("imupipe")
         rec.save(self.path)
         log_series_styles(rec, columns, means)
         rec.flush()  # the names before the data: log() is batched, send_columns() is not
-        rec.send_blueprint(blueprint(None, self.groups, self.bin_s))
+        send_blueprint(rec, blueprint(None, self.groups, self.bin_s))
         self._sender = threading.Thread(
             target=_send_signals,
             args=(rec, frames, columns, means, not enveloped),
@@ -660,16 +659,24 @@ class RrdWriter:
         )
         _log_events(rec, result, self._floors)
         self._sender.join()
-        rec.send_blueprint(blueprint(result, self.groups, self.bin_s))
-        rec.flush()
-        rec.disconnect()
+        send_blueprint(rec, blueprint(result, self.groups, self.bin_s))
+        del rec
+        self._close()
         return self.path
 
     def discard(self) -> None:
         """Stop after a failed analysis: wait for the sender, close, and delete the file."""
         self._sender.join()
-        self._rec.disconnect()
+        self._close()
         self.path.unlink(missing_ok=True)
+
+    def _close(self) -> None:
+        """Flush and disconnect the stream, and let rerun drop it
+        (:mod:`imupipe.report.rerun_streams`)."""
+        self._rec.flush()
+        self._rec.disconnect()
+        del self._rec
+        release_closed_streams()
 
 
 def write_rrd(result: AnalysisResult, frames: pl.DataFrame, path: Path, full: bool = False) -> Path:

@@ -1,0 +1,81 @@
+"""Rerun streams are let go once a recording is written: a fleet worker writes one
+``recording.rrd`` per unit in one process, and rerun-sdk 0.41 keeps each stream (two threads,
+and every array logged) until it is swept (:mod:`imupipe.report.rerun_streams`)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import rerun as rr
+
+from imupipe.fleet.curves import UNIT_COLUMN
+from imupipe.fleet.rerun_view import write_fleet_rrd
+from imupipe.report.rerun_view import write_rrd
+
+
+def _stream_threads() -> int:
+    """Threads of this process that rerun starts per recording stream (Linux task names)."""
+    names = (Path(f"/proc/self/task/{t}/comm").read_text() for t in os.listdir("/proc/self/task"))
+    return sum(n.startswith(("RecordingStream", "ChunkBatcher")) for n in names)
+
+
+def _frames(n: int = 3_000) -> pl.DataFrame:
+    rng = np.random.default_rng(3)
+    cols = {"t_s": np.arange(n) / 100.0}
+    cols |= {a: rng.normal(0.0, 1e-2, n) for a in ("gyro_x", "gyro_y", "gyro_z")}
+    cols |= {a: rng.normal(0.0, 1e-2, n) for a in ("accel_x", "accel_y", "accel_z")}
+    return pl.DataFrame(cols)
+
+
+def test_recordings_written_one_after_another_leave_no_stream_behind(
+    tmp_path: Path, synthetic_result, rrd_chunks
+) -> None:
+    result, frames = synthetic_result(), _frames()
+    write_rrd(result, frames, tmp_path / "first.rrd")  # rerun's own threads start once
+    before = _stream_threads()
+    for k in range(3):
+        path = write_rrd(result, frames, tmp_path / f"unit{k}.rrd")
+    assert _stream_threads() <= before  # was 2 more per file, and 2 per blueprint sent
+    viewports = [
+        i for i, (entity, _, _) in enumerate(rrd_chunks.lines(path)) if entity == "/viewport"
+    ]
+    last_data = max(i for i, (_, _, cols) in enumerate(rrd_chunks.lines(path)) if "Scalars" in cols)
+    assert len(viewports) == 2 and viewports[-1] > last_data  # the layout first and last
+
+
+def test_the_fleet_recording_leaves_no_stream_behind(tmp_path: Path) -> None:
+    tau = np.geomspace(0.01, 100.0, 20)
+    fleet = pl.DataFrame(
+        {
+            UNIT_COLUMN: ["a"] * 20 + ["b"] * 20,
+            "axis": ["gyro_x"] * 40,
+            "unit": ["rad/s"] * 40,
+            "tau": np.r_[tau, tau],
+            "adev": np.r_[1e-3 / np.sqrt(tau), 1.2e-3 / np.sqrt(tau)],
+        }
+    )
+    pop = fleet.group_by("axis", "tau", maintain_order=True).agg(
+        pl.col("adev").median().alias("median"),
+        pl.col("adev").min().alias("lo"),
+        pl.col("adev").max().alias("hi"),
+    )
+    write_fleet_rrd(fleet, pop, tmp_path / "warm.rrd")
+    before = _stream_threads()
+    write_fleet_rrd(fleet, pop, tmp_path / "fleet.rrd")
+    assert _stream_threads() <= before
+
+
+def test_a_callers_global_recording_is_left_alone(tmp_path: Path, synthetic_result) -> None:
+    """The sweep would unset the process's global recording: a script that logs to its own
+    ``rr.init`` recording and calls imupipe keeps logging to it."""
+    own = rr.RecordingStream("caller", make_default=False, make_thread_default=False)
+    rr.set_global_data_recording(own)
+    try:
+        write_rrd(synthetic_result(), _frames(), tmp_path / "recording.rrd")
+        still = rr.get_global_data_recording()
+        assert still is not None and still.get_recording_id() == own.get_recording_id()
+    finally:
+        rr.set_global_data_recording(None)
