@@ -282,7 +282,8 @@ def test_embedded_workers_are_single_threaded():
 def test_embedded_workers_keep_glibc_malloc_trimming_and_run_no_profiler():
     """Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 and its workers sample every task's stack
     every 10 ms: 5.0 s instead of 3.6 s per 1 h unit.  The embedded cluster's workers have
-    neither, and each is pinned to one thread."""
+    neither, and each is pinned to one thread; their event loop checks its health every second
+    (not every 20 ms), the host is read every 2 s, and the scheduler steals no tasks."""
     import os
 
     import dask.config
@@ -294,12 +295,19 @@ def test_embedded_workers_keep_glibc_malloc_trimming_and_run_no_profiler():
             os.environ.get("MALLOC_TRIM_THRESHOLD_"),
             dask.config.get("distributed.worker.profile.enabled"),
             os.environ.get("NUMBA_NUM_THREADS"),
+            dask.config.get("distributed.admin.tick.interval"),
+            dask.config.get("distributed.admin.system-monitor.interval"),
         )
 
     with fleet_client(None, 1) as client:
         (seen,) = client.run(probe).values()
-    assert seen == (None, False, "1")
+        stealing = client.run_on_scheduler(
+            lambda dask_scheduler: "stealing" in dask_scheduler.extensions
+        )
+    assert seen == (None, False, "1", "1s", "2s")
+    assert not stealing
     assert dask.config.get("distributed.worker.profile.enabled")  # the client's is untouched
+    assert dask.config.get("distributed.admin.tick.interval") == "20ms"
 
 
 def test_a_script_without_a_main_guard_fails_in_seconds_instead_of_hanging(tmp_path):
