@@ -82,6 +82,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_odd_inputs.py",
     ),
     "pipeline/io/db3_scan.py": ("tests/io/test_db3_bags.py",),
+    "pipeline/report/rerun_streams.py": ("tests/report/test_rerun_streams.py",),
     "pipeline/io/decode.py": (
         "tests/io/test_decode_contract.py",
         "tests/io/test_scale_factors.py",

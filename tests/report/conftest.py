@@ -180,6 +180,20 @@ class RrdChunks:
         return [(m[2], int(m[1]), m[3]) for m in found if m]
 
     @staticmethod
+    def activations(path: Path) -> list[tuple[bool, bool]]:
+        """(make_active, make_default) of every blueprint activation, in file order."""
+        out = subprocess.run(
+            [rerun_executable(), "rrd", "print", str(path)],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
+        found = re.findall(
+            r"BlueprintActivationCommand\(.*make_active: (\w+), make_default: (\w+)\)", out
+        )
+        return [(active == "true", default == "true") for active, default in found]
+
+    @staticmethod
     def rows(path: Path) -> dict[str, int]:
         """{entity path: rows of its data} of the data (not blueprint) chunks, summed."""
         chunks: dict[str, int] = {}

@@ -44,9 +44,10 @@ def test_recordings_written_one_after_another_leave_no_stream_behind(
     ]
     last_data = max(i for i, (_, _, cols) in enumerate(rrd_chunks.lines(path)) if "Scalars" in cols)
     assert len(viewports) == 2 and viewports[-1] > last_data  # the layout first and last
+    assert rrd_chunks.activations(path) == [(True, True), (True, True)]  # each shown at once
 
 
-def test_the_fleet_recording_leaves_no_stream_behind(tmp_path: Path) -> None:
+def test_the_fleet_recording_leaves_no_stream_behind(tmp_path: Path, rrd_chunks) -> None:
     tau = np.geomspace(0.01, 100.0, 20)
     fleet = pl.DataFrame(
         {
@@ -64,8 +65,9 @@ def test_the_fleet_recording_leaves_no_stream_behind(tmp_path: Path) -> None:
     )
     write_fleet_rrd(fleet, pop, tmp_path / "warm.rrd")
     before = _stream_threads()
-    write_fleet_rrd(fleet, pop, tmp_path / "fleet.rrd")
+    path = write_fleet_rrd(fleet, pop, tmp_path / "fleet.rrd")
     assert _stream_threads() <= before
+    assert rrd_chunks.activations(path) == [(True, True)]
 
 
 def test_a_callers_global_recording_is_left_alone(tmp_path: Path, synthetic_result) -> None:
