@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 import rerun as rr
+from rerun.recording_stream import bindings
 
 from imupipe.fleet.curves import UNIT_COLUMN
 from imupipe.fleet.rerun_view import write_fleet_rrd
@@ -34,8 +35,7 @@ def test_recordings_written_one_after_another_leave_no_stream_behind(
     tmp_path: Path, synthetic_result, rrd_chunks
 ) -> None:
     result, frames = synthetic_result(), _frames()
-    write_rrd(result, frames, tmp_path / "first.rrd")  # rerun's own threads start once
-    before = _stream_threads()
+    before = _stream_threads()  # rerun's own threads (tokio, jemalloc) are not counted
     for k in range(3):
         path = write_rrd(result, frames, tmp_path / f"unit{k}.rrd")
     assert _stream_threads() <= before  # was 2 more per file, and 2 per blueprint sent
@@ -70,14 +70,22 @@ def test_the_fleet_recording_leaves_no_stream_behind(tmp_path: Path, rrd_chunks)
     assert rrd_chunks.activations(path) == [(True, True)]
 
 
-def test_a_callers_global_recording_is_left_alone(tmp_path: Path, synthetic_result) -> None:
-    """The sweep would unset the process's global recording: a script that logs to its own
-    ``rr.init`` recording and calls imupipe keeps logging to it."""
+def test_a_callers_own_recordings_are_left_alone(tmp_path: Path, synthetic_result) -> None:
+    """The sweep would unset the process's global recording, and a stream made a default would
+    replace the caller's: a script that logs to its own ``rr.init`` (or thread-local) recording
+    and calls imupipe keeps logging to it, and no blueprint recording is left set."""
     own = rr.RecordingStream("caller", make_default=False, make_thread_default=False)
+    mine = rr.RecordingStream("caller_thread", make_default=False, make_thread_default=False)
     rr.set_global_data_recording(own)
+    rr.set_thread_local_data_recording(mine)
     try:
         write_rrd(synthetic_result(), _frames(), tmp_path / "recording.rrd")
         still = rr.get_global_data_recording()
         assert still is not None and still.get_recording_id() == own.get_recording_id()
+        here = rr.get_thread_local_data_recording()
+        assert here is not None and here.get_recording_id() == mine.get_recording_id()
+        assert bindings.get_global_blueprint_recording() is None
+        assert bindings.get_thread_local_blueprint_recording() is None
     finally:
         rr.set_global_data_recording(None)
+        rr.set_thread_local_data_recording(None)
