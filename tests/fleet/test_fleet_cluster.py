@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -336,3 +337,25 @@ def test_a_script_without_a_main_guard_fails_in_seconds_instead_of_hanging(tmp_p
         "FleetError: a fleet was started while a worker process was importing the calling "
         'script: call imupipe.analyze_fleet under `if __name__ == "__main__":`'
     ) in proc.stderr
+
+
+def test_the_docs_give_deployments_the_embedded_clusters_settings():
+    """docs/fleets.md's configuration file for a user's own cluster sets exactly the Dask
+    options the embedded cluster changes (so the two cannot drift apart)."""
+    from pathlib import Path
+
+    import yaml
+
+    from imupipe.fleet.cluster import WORKER_CONFIG
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "fleets.md").read_text()
+    (block,) = re.findall(r"```yaml\n(.*?)```", page, re.S)
+
+    def flat(tree: dict, prefix: str = "") -> dict:
+        out = {}
+        for key, value in tree.items():
+            name = f"{prefix}{key}"
+            out |= flat(value, f"{name}.") if isinstance(value, dict) else {name: value}
+        return out
+
+    assert flat(yaml.safe_load(block)) == WORKER_CONFIG
