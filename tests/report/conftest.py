@@ -165,31 +165,30 @@ class RrdChunks:
     """The chunks of a ``.rrd`` as ``rerun rrd print`` lists them (the real viewer's reader)."""
 
     @staticmethod
-    def lines(path: Path) -> list[tuple[str, int, str]]:
-        """(entity path, rows, data columns) of every chunk in file order (`rerun rrd print`)."""
-        out = subprocess.run(
+    def printed(path: Path) -> str:
+        """What `rerun rrd print` lists of the file."""
+        return subprocess.run(
             [rerun_executable(), "rrd", "print", str(path)],
             capture_output=True,
             text=True,
             check=True,
         ).stdout
+
+    @staticmethod
+    def lines(path: Path) -> list[tuple[str, int, str]]:
+        """(entity path, rows, data columns) of every chunk in file order (`rerun rrd print`)."""
         found = (
             re.match(r"Chunk\(\S+\) with (\d+) rows .* - (/\S+) - (.*)", x)
-            for x in out.splitlines()
+            for x in RrdChunks.printed(path).splitlines()
         )
         return [(m[2], int(m[1]), m[3]) for m in found if m]
 
     @staticmethod
     def activations(path: Path) -> list[tuple[bool, bool]]:
         """(make_active, make_default) of every blueprint activation, in file order."""
-        out = subprocess.run(
-            [rerun_executable(), "rrd", "print", str(path)],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout
         found = re.findall(
-            r"BlueprintActivationCommand\(.*make_active: (\w+), make_default: (\w+)\)", out
+            r"BlueprintActivationCommand\(.*make_active: (\w+), make_default: (\w+)\)",
+            RrdChunks.printed(path),
         )
         return [(active == "true", default == "true") for active, default in found]
 
