@@ -8,7 +8,7 @@ from Python wait in its garbage queue until that sweep.  A blueprint sent with
 is read through keeps alive for good.  A command exits and loses nothing; a fleet worker
 analyses unit after unit in one process, and each ``recording.rrd`` left its streams behind:
 6 threads and ~20 MB a unit (1 h units, ten in a row in one process: 72 threads and 620 MB of
-resident memory, against 16 threads and 470 MB with these helpers).
+resident memory, against 12 threads and ~480 MB with these helpers).
 """
 
 from __future__ import annotations
