@@ -23,19 +23,17 @@ WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "2s",
-    "distributed.scheduler.work-stealing": False,
 }
 """Dask settings of the embedded cluster (its scheduler and workers): glibc's own malloc trim
 threshold (Dask sets 64 KiB, so each analysis' large temporaries are returned to the OS and
 faulted in again) and no statistical profiler sampling the task's stack every 10 ms: measured
 on 1 h / 100 Hz units, one worker, 5.0 s per unit with Dask's defaults, 3.6 s with these two.
-The event loops' health check every 1 s instead of 20 ms, the host's CPU and memory read every
-2 s instead of 0.5 s, and no work stealing (the scheduler queues a fleet's tasks and hands one
-to a worker when it is free, so there is nothing to steal; the balancing runs every 100 ms):
-with two workers on two cores these callbacks run on the cores the analyses need, and the
-fleet of 12 units took 20.4–21.4 s with them against 21.2–22.2 s without (four rounds each,
-alternated).  A user's own cluster keeps its deployment's settings (docs/fleets.md says
-which to set)."""
+The event loops' health check every 1 s instead of 20 ms and the host's CPU and memory read
+every 2 s instead of 0.5 s: with two workers on two cores these callbacks run on the cores the
+analyses need (12 units on 2 workers, four rounds alternated: 20.4–21.4 s against 21.2–22.2 s,
+with work stealing off as well; stealing on or off alone, three rounds each, made no difference,
+and it stays on: it is what moves a long recording queued behind another to an idle worker).
+A user's own cluster keeps its deployment's settings (docs/fleets.md says which to set)."""
 
 SINGLE_THREAD_ENV = {"NUMBA_NUM_THREADS": "1", "POLARS_MAX_THREADS": "1"}
 """Set in every embedded worker process (Dask's nanny already sets OMP/MKL/OpenBLAS to one

@@ -284,7 +284,8 @@ def test_embedded_workers_keep_glibc_malloc_trimming_and_run_no_profiler():
     """Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 and its workers sample every task's stack
     every 10 ms: 5.0 s instead of 3.6 s per 1 h unit.  The embedded cluster's workers have
     neither, and each is pinned to one thread; their event loop checks its health every second
-    (not every 20 ms), the host is read every 2 s, and the scheduler steals no tasks."""
+    (not every 20 ms), and the host is read every 2 s; the scheduler still steals tasks (a long
+    recording queued behind another moves to an idle worker)."""
     import os
 
     import dask.config
@@ -306,7 +307,7 @@ def test_embedded_workers_keep_glibc_malloc_trimming_and_run_no_profiler():
             lambda dask_scheduler: "stealing" in dask_scheduler.extensions
         )
     assert seen == (None, False, "1", "1s", "2s")
-    assert not stealing
+    assert stealing
     assert dask.config.get("distributed.worker.profile.enabled")  # the client's is untouched
     assert dask.config.get("distributed.admin.tick.interval") == "20ms"
 
