@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import polars as pl
 import pytest
 from scipy.stats import chi2
 
@@ -147,6 +148,26 @@ class StandInTruth:
     rate_hz: float = RATE_HZ
     frames: int = FRAMES
     k_gyro_x: float = K_GYRO_X  # rad/s²/√Hz
+
+
+def _signal_frames(n: int, ros: bool = False) -> pl.DataFrame:
+    """``n`` frames at 100 Hz of white noise on the six axes, a wandering temperature and a
+    5 V supply (``ros``: no supply column and a null temperature, as a ROS bag decodes)."""
+    rng = np.random.default_rng(7)
+    cols = {"t_s": np.arange(n) / 100.0}
+    for name in ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"):
+        cols[name] = rng.normal(0.0, 1e-2, n)
+    cols["temp_c"] = 25.0 + np.cumsum(rng.normal(0, 1e-3, n))
+    frame = pl.DataFrame(cols)
+    if ros:  # a ROS bag without SUPPLY_OUT and with a null temperature column
+        return frame.with_columns(pl.lit(None, dtype=pl.Float64).alias("temp_c"))
+    return frame.with_columns(supply_v=pl.Series(np.full(n, 5.0)))
+
+
+@pytest.fixture(scope="session")
+def signal_frames() -> Callable[..., pl.DataFrame]:
+    """``signal_frames(n, ros=False)``: the raw frames a Rerun recording is written from."""
+    return _signal_frames
 
 
 @pytest.fixture(scope="session")

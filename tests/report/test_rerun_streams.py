@@ -23,18 +23,10 @@ def _stream_threads() -> int:
     return sum(n.startswith(("RecordingStream", "ChunkBatcher")) for n in names)
 
 
-def _frames(n: int = 3_000) -> pl.DataFrame:
-    rng = np.random.default_rng(3)
-    cols = {"t_s": np.arange(n) / 100.0}
-    cols |= {a: rng.normal(0.0, 1e-2, n) for a in ("gyro_x", "gyro_y", "gyro_z")}
-    cols |= {a: rng.normal(0.0, 1e-2, n) for a in ("accel_x", "accel_y", "accel_z")}
-    return pl.DataFrame(cols)
-
-
 def test_recordings_written_one_after_another_leave_no_stream_behind(
-    tmp_path: Path, synthetic_result, rrd_chunks
+    tmp_path: Path, synthetic_result, signal_frames, rrd_chunks
 ) -> None:
-    result, frames = synthetic_result(), _frames()
+    result, frames = synthetic_result(), signal_frames(3_000)
     before = _stream_threads()  # rerun's own threads (tokio, jemalloc) are not counted
     for k in range(3):
         path = write_rrd(result, frames, tmp_path / f"unit{k}.rrd")
@@ -70,7 +62,9 @@ def test_the_fleet_recording_leaves_no_stream_behind(tmp_path: Path, rrd_chunks)
     assert rrd_chunks.activations(path) == [(True, True)]
 
 
-def test_a_callers_own_recordings_are_left_alone(tmp_path: Path, synthetic_result) -> None:
+def test_a_callers_own_recordings_are_left_alone(
+    tmp_path: Path, synthetic_result, signal_frames
+) -> None:
     """The sweep would unset the process's global recording, and a stream made a default would
     replace the caller's: a script that logs to its own ``rr.init`` (or thread-local) recording
     and calls imupipe keeps logging to it, and no blueprint recording is left set."""
@@ -79,7 +73,7 @@ def test_a_callers_own_recordings_are_left_alone(tmp_path: Path, synthetic_resul
     rr.set_global_data_recording(own)
     rr.set_thread_local_data_recording(mine)
     try:
-        write_rrd(synthetic_result(), _frames(), tmp_path / "recording.rrd")
+        write_rrd(synthetic_result(), signal_frames(3_000), tmp_path / "recording.rrd")
         still = rr.get_global_data_recording()
         assert still is not None and still.get_recording_id() == own.get_recording_id()
         here = rr.get_thread_local_data_recording()

@@ -22,26 +22,16 @@ from imupipe.report.rerun_view import open_viewer, rerun_executable, signal_colu
 from imupipe.units import from_si
 
 
-def _frames(n: int, ros: bool = False) -> pl.DataFrame:
-    rng = np.random.default_rng(7)
-    cols = {"t_s": np.arange(n) / 100.0}
-    for name in ("gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"):
-        cols[name] = rng.normal(0.0, 1e-2, n)
-    cols["temp_c"] = 25.0 + np.cumsum(rng.normal(0, 1e-3, n))
-    frame = pl.DataFrame(cols)
-    if ros:  # a ROS bag without SUPPLY_OUT and with a null temperature column
-        return frame.with_columns(pl.lit(None, dtype=pl.Float64).alias("temp_c"))
-    return frame.with_columns(supply_v=pl.Series(np.full(n, 5.0)))
-
-
 def _verify(path: Path) -> subprocess.CompletedProcess:
     return subprocess.run(
         [rerun_executable(), "rrd", "verify", str(path)], capture_output=True, text=True
     )
 
 
-def test_rrd_verifies_and_holds_every_signal(tmp_path: Path, synthetic_result, rrd_chunks) -> None:
-    frames = _frames(20_000)
+def test_rrd_verifies_and_holds_every_signal(
+    tmp_path: Path, synthetic_result, rrd_chunks, signal_frames
+) -> None:
+    frames = signal_frames(20_000)
     path = write_rrd(synthetic_result(), frames, tmp_path / "recording.rrd")
     done = _verify(path)
     assert done.returncode == 0, done.stdout + done.stderr
@@ -60,18 +50,22 @@ def test_rrd_verifies_and_holds_every_signal(tmp_path: Path, synthetic_result, r
     assert not any(p.startswith("/residual/gyro") for p in chunks)  # no loop on the gyros
 
 
-def test_ros_frames_without_temperature_or_supply(tmp_path: Path, synthetic_result) -> None:
-    frames = _frames(5_000, ros=True)
+def test_ros_frames_without_temperature_or_supply(
+    tmp_path: Path, synthetic_result, signal_frames
+) -> None:
+    frames = signal_frames(5_000, ros=True)
     assert list(signal_columns(frames)) == ["gyro", "accel"]  # no temperature, no supply plot
     path = write_rrd(synthetic_result(with_loop=False), frames, tmp_path / "ros.rrd")
     done = _verify(path)
     assert done.returncode == 0, done.stdout + done.stderr
 
 
-def test_full_signals_go_in_bulk_chunks(tmp_path: Path, synthetic_result, rrd_chunks) -> None:
+def test_full_signals_go_in_bulk_chunks(
+    tmp_path: Path, synthetic_result, rrd_chunks, signal_frames
+) -> None:
     """--rrd-full sends 250 k frames per plot in CHUNK_ROWS-row batches, never per sample (the
     whole analyze wall time, rrd included, is reported by benchmarks/bench_decode.py --analyze)."""
-    frames = _frames(250_000)
+    frames = signal_frames(250_000)
     path = write_rrd(synthetic_result(), frames, tmp_path / "big.rrd", full=True)
     for plot in ("gyro", "accel", "temperature", "supply"):
         rows = [
@@ -191,10 +185,10 @@ def test_summary_states_si_beside_the_paper_units(synthetic_result) -> None:
 
 
 def test_layout_and_names_come_before_the_data_and_long_runs_are_enveloped(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, synthetic_result, rrd_chunks
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, synthetic_result, rrd_chunks, signal_frames
 ) -> None:
     monkeypatch.setattr(rv, "ENVELOPE_BINS", 1_000)
-    frames = _frames(20_000)
+    frames = signal_frames(20_000)
     path = write_rrd(synthetic_result(), frames, tmp_path / "small.rrd")
     chunks = rrd_chunks.lines(path)
     first_data = next(i for i, c in enumerate(chunks) if "Scalars:scalars" in c[2])
@@ -283,12 +277,12 @@ def _with_events(result, spans: list[tuple[int, int] | None], tau0: float, t0: f
 
 
 def test_excised_events_are_red_bars_below_the_signals_on_the_recording_timeline(
-    tmp_path: Path, synthetic_result, rrd_chunks
+    tmp_path: Path, synthetic_result, rrd_chunks, signal_frames
 ) -> None:
     """Two excised events (and a kept step, not drawn) on a segment starting 3 s into the
     recording: each a bar from its first to its last excised sample's time, below the lowest
     value the gyro and accel plots draw, a NaN after it; not on temperature or supply."""
-    frames = _frames(20_000)
+    frames = signal_frames(20_000)
     result = _with_events(synthetic_result(), [(1_000, 1_500), None, (6_000, 6_200)], 0.01, 3.0)
     sent: dict[str, tuple] = {}
 
