@@ -82,6 +82,13 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_odd_inputs.py",
     ),
     "pipeline/io/db3_scan.py": ("tests/io/test_db3_bags.py",),
+    "pipeline/io/mcap_walk.py": (
+        "tests/io/test_cdr_rows.py",
+        "tests/io/test_busy_bags.py",
+        "tests/io/test_fuzz_decoder.py",
+        "tests/io/test_mcap_io.py",
+        "tests/test_odd_inputs.py",
+    ),
     "pipeline/report/rerun_streams.py": ("tests/report/test_rerun_streams.py",),
     "pipeline/io/decode.py": (
         "tests/io/test_decode_contract.py",
