@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import json
 import shutil
+import subprocess
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -472,3 +473,99 @@ def test_gaps_mask_analyses_the_whole_recording(tmp_path: Path, capsys, clean: F
     allan = report["axes"]["gyro_x"]["allan"]
     assert allan["n_terms"][0] == (N + 1 - 2) - 2  # m = 1: the two terms over sample 2000
     assert allan["n_terms"][2] == (N + 1 - 6) - 6  # m = 3: 2m terms lost
+
+
+CONVERT_HINT = "a ROS 1 bag converts to a ROS 2 one with `rosbags-convert --src BAG --dst DIR`"
+
+
+def write_encoded(path: Path, schema: str, encoding: str, payloads: np.ndarray) -> Path:
+    """One ``/imu/data`` channel of ``schema`` in message ``encoding`` (the mcap library's
+    writer), one message a row of ``payloads``, 100 Hz."""
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="another producer")
+        sid = w.register_schema(schema, "jsonschema" if encoding == "json" else "ros1msg", b"")
+        cid = w.register_channel("/imu/data", encoding, sid)
+        for k, row in enumerate(payloads):
+            t = 1_700_000_000_000_000_000 + k * 10_000_000
+            w.add_message(cid, log_time=t, data=row.tobytes(), publish_time=t)
+        w.finish()
+    return path
+
+
+def test_imu_messages_in_another_encoding_are_named_not_read_as_cdr(
+    tmp_path: Path, capsys, cli
+) -> None:
+    """A channel's message encoding decides how its bytes are read (MCAP spec): Imu messages
+    on a ``json`` channel are refused by name even when their bytes happen to be CDR, and a
+    ROS 1 bag converted to MCAP (``sensor_msgs/Imu``, ``ros1``) is named as such."""
+    cdr = imu_payloads(*imu_stream(3000))
+    for schema, encoding in ((IMU_SCHEMA, "json"), ("sensor_msgs/Imu", "ros1")):
+        path = write_encoded(tmp_path / f"{encoding}.mcap", schema, encoding, cdr)
+        code, report, err = analyze(path, capsys)
+        assert code == 2 and report == {}
+        assert err.strip() == (
+            f"imupipe: error: {path}: no IMU topic imupipe can read (/imu/data is {schema} in "
+            f"'{encoding}' encoding): imupipe reads ROS 2 messages (sensor_msgs/msg/Imu, 'cdr'); "
+            + CONVERT_HINT
+        )
+        assert f"  /imu/data  [{schema}, '{encoding}' encoding: not read]  3000 messages" in (
+            run_info(path, cli)
+        )
+    both = tmp_path / "both.mcap"  # the CDR topic beside it is read, alone
+    with open(both, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="another producer")
+        sid = w.register_schema(IMU_SCHEMA, "ros2msg", b"")
+        channels = {e: w.register_channel(f"/imu/{e}", e, sid) for e in ("json", "cdr")}
+        for k, row in enumerate(cdr):
+            t = 1_700_000_000_000_000_000 + k * 10_000_000
+            for cid in channels.values():
+                w.add_message(cid, log_time=t, data=row.tobytes(), publish_time=t)
+        w.finish()
+    code, report, err = analyze(both, capsys, "--topic", "all")
+    assert code == 0, err
+    assert [p.name for p in (tmp_path / "out").iterdir()] == [topic_folder("/imu/cdr")]
+
+
+def test_a_ros1_bag_is_named_and_its_conversion_reads_bit_for_bit(tmp_path: Path, capsys) -> None:
+    """A ROS 1 bag (rosbags' writer, ``sensor_msgs/Imu`` in ROS 1 serialisation) is refused in
+    one line that says how to convert it, and what that conversion (rosbags' converter) writes
+    decodes to the very values written."""
+    from rosbags.rosbag1 import Writer as Ros1Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from imupipe.io.decode import decode
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    types = store.types
+    stamps, gyro, accel = imu_stream(3000, seed=3)
+    bag = tmp_path / "night.bag"
+    with Ros1Writer(bag) as w:
+        conn = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=store)
+        for k, t in enumerate(stamps.tolist()):
+            msg = types["sensor_msgs/msg/Imu"](
+                types["std_msgs/msg/Header"](
+                    k, types["builtin_interfaces/msg/Time"](t // 10**9, t % 10**9), "imu"
+                ),
+                types["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0),
+                np.zeros(9),
+                types["geometry_msgs/msg/Vector3"](*gyro[k]),
+                np.zeros(9),
+                types["geometry_msgs/msg/Vector3"](*accel[k]),
+                np.zeros(9),
+            )
+            w.write(conn, t, store.serialize_ros1(msg, "sensor_msgs/msg/Imu"))
+    code, _, err = analyze(bag, capsys)
+    assert code == 2 and err.strip() == (
+        f"imupipe: error: {bag} is a ROS 1 bag, not MCAP: imupipe reads ROS 2 bags (MCAP or "
+        f"SQLite); {CONVERT_HINT}"
+    )
+    converted = tmp_path / "converted"
+    cmd = [sys.executable, "-m", "rosbags.convert", "--src", str(bag), "--dst", str(converted)]
+    subprocess.run(cmd, check=True, capture_output=True)
+    frames = decode(converted).frames
+    assert frames["stamp_ns"].to_list() == stamps.tolist()
+    for k, axis in enumerate(("gyro_x", "gyro_y", "gyro_z")):
+        np.testing.assert_array_equal(frames[axis].to_numpy(), gyro[:, k])
+        np.testing.assert_array_equal(frames[f"accel_{axis[-1]}"].to_numpy(), accel[:, k])

@@ -43,7 +43,7 @@ from mcap.records import Channel, Schema
 from imupipe.device import adis16364 as adis
 from imupipe.device.frame_schema import METADATA_NAME, SCHEMA_NAME, TAIL_SIZE, decode_frames
 from imupipe.errors import ConfigError, InputError
-from imupipe.io.mcap_scan import MAX_CHUNK_BYTES
+from imupipe.io.mcap_scan import CONVERT_ROS1, MAX_CHUNK_BYTES
 from imupipe.io.mcap_walk import CDR_HEAD, CdrLayout
 from imupipe.io.rosbag2 import bag_files, message_compression, opened
 from imupipe.pages import small_pages
@@ -52,6 +52,12 @@ from imupipe.vocab import AXES
 
 IMU_SCHEMA = "sensor_msgs/msg/Imu"
 TEMPERATURE_SCHEMA = "sensor_msgs/msg/Temperature"
+MESSAGE_ENCODING_READ = "cdr"
+"""The one message encoding read (MCAP spec, "Well-known message encodings": ``cdr``, what ROS 2
+writes); an IMU type in another (``ros1``, ``json``, ``protobuf``…) is named in the error."""
+OTHER_IMU_SCHEMAS = ("sensor_msgs/Imu",)
+"""ROS 1's name of the IMU message (schema encoding ``ros1msg``, message encoding ``ros1``: a
+ROS 1 bag converted to MCAP); not read, but named when a file has no IMU topic imupipe reads."""
 
 _IMU_TAIL = 8 * (4 + 9 + 3 + 9 + 3 + 9)  # orientation..linear_acceleration_covariance, bytes
 _IMU_GYRO = 8 * (4 + 9)  # offset of angular_velocity within the tail
@@ -681,9 +687,23 @@ def scan(
     path = Path(path)
     files, file_warnings = bag_files(path)
     kinds = {SCHEMA_NAME: "adis16364", IMU_SCHEMA: "imu", TEMPERATURE_SCHEMA: "temperature"}
+    unread_imu: dict[str, str] = {}  # topic -> its IMU type and encoding, which are not read
+
+    def read_kind(channel: Channel, schema: Schema | None) -> str | None:
+        """The kind of a channel's messages, None for one not read (noting an IMU one)."""
+        if schema is None:
+            return None
+        kind = kinds.get(schema.name)
+        if kind is not None and channel.message_encoding == MESSAGE_ENCODING_READ:
+            return kind
+        if kind in ("adis16364", "imu") or schema.name in OTHER_IMU_SCHEMAS:
+            unread_imu.setdefault(
+                channel.topic, f"{schema.name} in {channel.message_encoding!r} encoding"
+            )
+        return None
 
     def layout(channel: Channel, schema: Schema | None) -> CdrLayout | None:
-        if schema is None or schema.name not in kinds:
+        if read_kind(channel, schema) is None:
             return None
         kind = topic_kind.setdefault(channel.topic, kinds[schema.name])
         if kind != kinds[schema.name]:  # its messages cannot share one set of columns
@@ -757,9 +777,8 @@ def scan(
         warnings.extend(prefix + d for d in report.damage())
         for c in report.channels.values():
             all_topics.add(c.topic)
-            schema = report.schemas.get(c.schema_id)
-            if schema is not None and schema.name in kinds:
-                topic_kind[c.topic] = kinds[schema.name]
+            if kind := read_kind(c, report.schemas.get(c.schema_id)):
+                topic_kind[c.topic] = kind
 
     warnings.extend(
         f"{topic}: {count} malformed messages (size does not match the schema) skipped"
@@ -768,6 +787,12 @@ def scan(
     imu_topics = sorted(t for t, k in topic_kind.items() if k in ("adis16364", "imu"))
     if not imu_topics:
         listed = ", ".join(sorted(all_topics)) if all_topics else "none"
+        unread = "; ".join(f"{t} is {why}" for t, why in sorted(unread_imu.items()))
+        if unread:
+            raise InputError(
+                f"{path}: no IMU topic imupipe can read ({unread}): imupipe reads ROS 2 "
+                f"messages ({IMU_SCHEMA}, {MESSAGE_ENCODING_READ!r}); {CONVERT_ROS1}"
+            )
         raise InputError(f"{path}: no IMU topic (topics in the file: {listed})")
     if topic is None:
         with_data = [t for t in imu_topics if t in channels]

@@ -14,7 +14,7 @@ import numpy as np
 
 from imupipe.device.frame_schema import SCHEMA_NAME
 from imupipe.io.db3_scan import Db3Report
-from imupipe.io.decode import IMU_SCHEMA
+from imupipe.io.decode import IMU_SCHEMA, MESSAGE_ENCODING_READ
 from imupipe.io.mcap_scan import ScanReport
 from imupipe.io.rosbag2 import bag_files, message_compression, opened
 
@@ -23,9 +23,16 @@ from imupipe.io.rosbag2 import bag_files, message_compression, opened
 class TopicInfo:
     topic: str
     schema: str
+    encoding: str = MESSAGE_ENCODING_READ
+    """The channel's message encoding (``cdr``: ROS 2's, the one imupipe reads)."""
     messages: int = 0
     start_ns: int | None = None
     end_ns: int | None = None
+
+    @property
+    def read(self) -> bool:
+        """Messages in the encoding imupipe decodes."""
+        return self.encoding == MESSAGE_ENCODING_READ
 
     @property
     def duration_s(self) -> float:
@@ -65,9 +72,9 @@ class RecordingInfo:
         out = [f"{self.path}: {self.file_bytes / 1e6:.1f} MB, {storage}"]
         for t in self.topics:
             rate = (t.messages - 1) / t.duration_s if t.duration_s > 0 else 0.0
+            kind = t.schema if t.read else f"{t.schema}, {t.encoding!r} encoding: not read"
             out.append(
-                f"  {t.topic}  [{t.schema}]  {t.messages} messages, "
-                f"{t.duration_s:.1f} s, {rate:.2f} Hz"
+                f"  {t.topic}  [{kind}]  {t.messages} messages, {t.duration_s:.1f} s, {rate:.2f} Hz"
             )
         for name, meta in self.metadata.items():
             out.append(
@@ -82,7 +89,10 @@ def _topic(
 ) -> TopicInfo:
     channel = report.channels[channel_id]
     schema = report.schemas.get(channel.schema_id)
-    return topics.setdefault(channel.topic, TopicInfo(channel.topic, schema.name if schema else ""))
+    return topics.setdefault(
+        channel.topic,
+        TopicInfo(channel.topic, schema.name if schema else "", channel.message_encoding),
+    )
 
 
 def describe(path: Path) -> RecordingInfo:
@@ -129,9 +139,10 @@ def describe(path: Path) -> RecordingInfo:
 
 
 def imu_topics(path: Path) -> list[str]:
-    """The IMU topics (our ADIS16364 frames or ``sensor_msgs/msg/Imu``) that hold messages."""
+    """The IMU topics (our ADIS16364 frames or ``sensor_msgs/msg/Imu``, in CDR) that hold
+    messages."""
     return [
         t.topic
         for t in describe(path).topics
-        if t.schema in (SCHEMA_NAME, IMU_SCHEMA) and t.messages > 0
+        if t.schema in (SCHEMA_NAME, IMU_SCHEMA) and t.read and t.messages > 0
     ]

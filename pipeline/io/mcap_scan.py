@@ -60,6 +60,10 @@ from imupipe.io.mcap_walk import (
 )
 
 MAGIC = b"\x89MCAP0\r\n"
+ROS1_BAG_MAGIC = b"#ROSBAG"
+"""How a ROS 1 bag starts (ROS wiki, "Bags/Format/2.0": ``#ROSBAG V2.0`` and a newline)."""
+CONVERT_ROS1 = "a ROS 1 bag converts to a ROS 2 one with `rosbags-convert --src BAG --dst DIR`"
+"""How to read ROS 1 data: rosbags' converter writes a rosbag2 folder imupipe reads."""
 _CHUNK_FIXED = 8 + 8 + 8  # message_start_time, message_end_time, uncompressed_size
 UNPACK_THREADS = 2
 PREFETCH_RECORDS = 4
@@ -546,7 +550,13 @@ class McapScanner:
         except OSError as exc:
             raise InputError(f"{self.path}: cannot be read ({exc.strerror or exc})") from None
         with f:
-            if f.read(len(MAGIC)) != MAGIC:
+            magic = f.read(len(MAGIC))
+            if magic.startswith(ROS1_BAG_MAGIC):
+                raise NotMcapError(
+                    f"{self.path} is a ROS 1 bag, not MCAP: imupipe reads ROS 2 bags "
+                    f"(MCAP or SQLite); {CONVERT_ROS1}"
+                )
+            if magic != MAGIC:
                 raise NotMcapError(f"{self.path} is not an MCAP file (bad magic)")
             pos = len(MAGIC)
             while True:
