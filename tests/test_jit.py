@@ -78,6 +78,29 @@ def test_imported_kernels_are_the_packages_own_compiled_kernels() -> None:
     assert len(kernels) == len(set(map(id, kernels)))  # a re-exported kernel counted once
 
 
+def test_every_kernel_of_the_package_is_kept_in_numbas_disk_cache() -> None:
+    """A kernel declared without ``cache=True`` is compiled again in every process that calls
+    it (0.1-3 s each, every run, every fleet worker) and :func:`disk_cached` cannot tell: it
+    claims that a kernel without a disk cache has nothing to compile ahead."""
+    import importlib
+    import pkgutil
+
+    import imupipe
+    from imupipe.jit import imported_kernels
+
+    for module in pkgutil.walk_packages(imupipe.__path__, "imupipe."):
+        if not module.name.endswith("__main__"):  # the command line itself
+            importlib.import_module(module.name)
+    kernels = imported_kernels()
+    assert len(kernels) >= 30  # every stage's kernels were imported
+    uncached = [
+        f"{k.py_func.__module__}.{k.py_func.__qualname__}"
+        for k in kernels
+        if isinstance(k._cache, numba.core.caching.NullCache)
+    ]
+    assert uncached == []
+
+
 @pytest.mark.parametrize("cached", [True, False])
 def test_the_spilled_paths_compile_child_runs_only_on_a_cold_cache(
     cached: bool, monkeypatch: pytest.MonkeyPatch

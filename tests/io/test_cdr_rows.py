@@ -69,3 +69,24 @@ def test_a_repeated_declaration_keeps_its_slot_and_a_changed_one_is_reported() -
     snapshot = table.copy()
     table.set(6, TEMPERATURE)
     assert snapshot.slot_of[6] != table.slot_of[6] and len(snapshot.layouts) == 2
+
+
+def test_frame_ids_of_every_length_byte_and_a_foreign_header_among_good_messages() -> None:
+    """The frame_id's u32 length is read from all four bytes (frame_ids of 300, 70 000 and
+    2²⁴ + 2 characters: the fields after each are found), and a message that is not
+    little-endian plain CDR (encapsulation ``00 00``, big-endian) is counted malformed without
+    ending the rows of its channel: the messages after it are read."""
+    lengths = [3, 300, 70_000, (1 << 24) + 2]
+    payloads = [temperatures([float(k) + 0.25], "f" * n)[0] for k, n in enumerate(lengths)]
+    foreign = bytearray(payloads[0])
+    foreign[1] = 0  # big-endian CDR: not what ROS 2 writes, not read
+    records = [message(1, 10 + k, p) for k, p in enumerate(payloads)]
+    records.insert(1, message(1, 9, bytes(foreign)))
+    buf = np.frombuffer(b"".join(records), np.uint8)
+    table = CdrTable()
+    table.set(1, TEMPERATURE)
+    rows = cdr_rows(buf, index_messages(buf), table, stop_at_unknown=False)
+    assert rows.good.tolist() == [4] and rows.bad.tolist() == [1]
+    np.testing.assert_array_equal(rows.log_time[0], [10, 11, 12, 13])
+    celsius = rows.rows[0][:, 16:24].copy().view("<f8")[:, 0]
+    assert celsius.tolist() == [0.25, 1.25, 2.25, 3.25]
