@@ -82,6 +82,12 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_odd_inputs.py",
     ),
     "pipeline/io/db3_scan.py": ("tests/io/test_db3_bags.py",),
+    "pipeline/io/mcap_bulk.py": (
+        "tests/io/test_mcap_io.py",
+        "tests/recording/test_recorder_chunks.py",
+        "tests/io/test_decode_contract.py",
+        "tests/test_cli.py",
+    ),
     "pipeline/io/mcap_walk.py": (
         "tests/io/test_cdr_rows.py",
         "tests/io/test_busy_bags.py",
