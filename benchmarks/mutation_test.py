@@ -133,6 +133,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     ),
     "pipeline/fleet/population.py": ("tests/fleet/test_fleet_population.py",),
     "pipeline/fleet/curves.py": ("tests/fleet/test_fleet_population.py",),
+    "pipeline/fleet/discover.py": ("tests/fleet/test_fleet_population.py",),
     "pipeline/model/effects.py": (
         "tests/model/test_whitener.py",
         "tests/model/test_loop_vibration.py",
