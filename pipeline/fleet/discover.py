@@ -22,9 +22,12 @@ import fsspec
 from fsspec.implementations.local import LocalFileSystem
 
 from imupipe.errors import FleetError
+from imupipe.io.mcap_scan import CONVERT_ROS1
 from imupipe.io.rosbag2 import STORAGE_SUFFIXES
 
 ROSBAG2_METADATA = "metadata.yaml"
+ROS1_SUFFIX = ".bag"
+"""A ROS 1 bag's file name: not read, but named when a folder holds nothing else."""
 _GLOB_CHARS = re.compile(r"[*?\[]")
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 MAX_NAME = 120
@@ -85,7 +88,9 @@ def _expand(spec: str) -> list[tuple[fsspec.AbstractFileSystem, str, bool]]:
         else:
             out += [(fs, p, d) for p, d in _walk(fs, path)]
     if not out:
-        raise FleetError(f"{spec}: no recording there (no such path, or no MCAP file or bag)")
+        ros1 = [f for p in paths if fs.isdir(p) for f in fs.find(p) if f.endswith(ROS1_SUFFIX)]
+        hint = f"; it holds {len(ros1)} ROS 1 bag(s): {CONVERT_ROS1}" if ros1 else ""
+        raise FleetError(f"{spec}: no recording there (no such path, or no MCAP file or bag){hint}")
     return out
 
 

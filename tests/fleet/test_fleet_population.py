@@ -463,6 +463,16 @@ def test_discover_files_bags_folders_globs(tmp_path):
         discover([str(tmp_path / "missing")])
     with pytest.raises(FleetError, match="no recording"):
         discover([str(tmp_path / "site" / "*.bag")])
+    (tmp_path / "ros1" / "day 2").mkdir(parents=True)  # ROS 1 bags only: named, not read
+    for name in ("a.bag", "day 2/b.bag"):
+        (tmp_path / "ros1" / name).write_bytes(b"#ROSBAG V2.0\n")
+    with pytest.raises(FleetError) as refused:
+        discover([str(tmp_path / "ros1")])
+    assert str(refused.value) == (
+        f"{tmp_path / 'ros1'}: no recording there (no such path, or no MCAP file or bag); it "
+        "holds 2 ROS 1 bag(s): a ROS 1 bag converts to a ROS 2 one with `rosbags-convert "
+        "--src BAG --dst DIR`"
+    )
 
 
 def test_unit_names_are_safe_and_unique():
