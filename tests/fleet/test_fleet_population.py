@@ -484,6 +484,14 @@ def test_unit_names_are_safe_and_unique():
     ]
 
 
+def test_a_folder_is_used_up_to_a_name_of_exactly_max_name_characters():
+    fits = "f" * (MAX_NAME - len("_calib"))  # with it, the name is MAX_NAME long: used
+    names = unique_names([f"{fits}/calib.mcap", f"g{fits[1:]}/calib.mcap"])
+    assert names == [f"{fits}_calib", f"g{fits[1:]}_calib"] and len(names[0]) == MAX_NAME
+    over = fits + "f"  # one character more: the folders are not used, the names numbered
+    assert unique_names([f"{over}/calib.mcap", f"g{over[1:]}/calib.mcap"]) == ["calib", "calib-2"]
+
+
 def test_recordings_named_alike_are_told_apart_by_their_folders():
     # one calibration bag per robot and week (files or rosbag2 folders): the unit names say
     # which robot, with as few folders as it takes, and stay unique for a fleet of any size
