@@ -49,6 +49,12 @@ def recording(n: int = 1000, rate: float = 100.0, seed: int = 0, **edits) -> Imu
     )
 
 
+def test_an_axis_beyond_the_float_range_names_its_largest_magnitude() -> None:
+    y = np.random.default_rng(0).normal(0, 1, 1000)
+    y[5] = -3e101  # the negative extreme is the largest in magnitude
+    assert unanalysable(y) == "reaches 3e+101, beyond what float64 Allan sums hold (1e100)"
+
+
 def test_clean_recording_is_one_segment() -> None:
     s = condition(recording())
     assert len(s.segments) == 1 and s.segment.frames == 1000
@@ -461,6 +467,22 @@ def test_mask_policy_stamp_gap_wins_over_a_counter_that_disagrees() -> None:
     s = condition(recording(stamp_ns=jump), gaps="mask")
     assert s.samples == 1006
     np.testing.assert_array_equal(np.flatnonzero(s.excluded), np.arange(300, 307))
+
+
+def test_mask_policy_two_stamps_wrong_in_a_row_are_bridged_only_if_their_span_agrees() -> None:
+    """Row 200 stamped 6 periods late and every row after it 12 (counter steps of 1): the two
+    steps around row 200 disagree with the counter and so does their span (14 periods against
+    2), so nothing is bridged: the stamps place the rows, 12 grid places are missing and rows
+    200 and 201 are uncertain.  (A span read wrong, as about 1 period, would agree with the
+    counter's 2 within one sample and pull the rows back onto 1000 places.)"""
+
+    def two(a):
+        a[200] += 60_000_000
+        a[201:] += 120_000_000
+
+    s = condition(recording(stamp_ns=two), gaps="mask")
+    assert s.samples == 1012
+    np.testing.assert_array_equal(np.flatnonzero(s.excluded), np.arange(200, 214))
 
 
 def test_mask_policy_repeated_counter_row_is_masked_not_stacked() -> None:
