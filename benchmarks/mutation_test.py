@@ -96,6 +96,10 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_odd_inputs.py",
     ),
     "pipeline/report/rerun_streams.py": ("tests/report/test_rerun_streams.py",),
+    "pipeline/report/rerun_view.py": (
+        "tests/report/test_rerun_view.py",
+        "tests/report/test_rerun_streams.py",
+    ),
     "pipeline/io/decode.py": (
         "tests/io/test_decode_contract.py",
         "tests/io/test_scale_factors.py",
