@@ -131,9 +131,11 @@ class _KeepLogs:
 
     def __init__(self) -> None:
         self.logged: dict[str, object] = {}
+        self.static: dict[str, bool] = {}
 
     def log(self, path: str, archetype: object, static: bool = False) -> None:
         self.logged[path] = archetype
+        self.static[path] = static
 
 
 def _labels(archetype: object) -> list[str]:
@@ -314,3 +316,162 @@ def test_excised_events_are_red_bars_below_the_signals_on_the_recording_timeline
     assert rrd_chunks.rows(path)["/signals/accel/excised"] == 6
     plain = write_rrd(synthetic_result(), frames, tmp_path / "none.rrd")  # no events: no bars
     assert not any("excised" in e for e in rrd_chunks.rows(plain))
+
+
+def test_the_sigma_axis_is_labelled_by_the_decades_the_curves_span_highest_first(
+    synthetic_result,
+) -> None:
+    rec = _KeepLogs()
+    rv._log_allan(rec, "accel", synthetic_result().by_sensor("accel"))
+    grid = rec.logged["allan/accel/grid_labels"]
+    labels, positions = _labels(grid), grid.positions.as_arrow_array().to_pylist()
+    sigma = [
+        (label, y) for label, (_, y) in zip(labels, positions, strict=True) if "τ" not in label
+    ]
+    # the scene's y is −log10 σ: 1e-1 at the top (y = 1), 1e-4 at the bottom (y = 4)
+    assert sigma == [("1e-1 m/s²", 1.0), ("1e-2 m/s²", 2.0), ("1e-3 m/s²", 3.0), ("1e-4 m/s²", 4.0)]
+
+
+def test_residual_z_is_drawn_upwards_when_positive_and_clipped_at_the_views_limit(
+    synthetic_result,
+) -> None:
+    axis = synthetic_result().axes["accel_x"]
+    z = np.where(np.arange(len(axis.curve.tau_s)) % 2 == 0, 2.0, -2.0)
+    z[10] = 50.0  # beyond Z_LIMIT: drawn at the view's edge
+    axis = replace(axis, loop=replace(axis.loop, after=replace(axis.loop.after, z=z)))
+    ext = rv.residual_extent([axis])
+    assert (ext.top, ext.bottom) == pytest.approx((-3.0, 3.0))  # ±10 at 0.3 scene units each
+    rec = _KeepLogs()
+    rv._log_residuals(rec, "accel", [axis])
+    (strip,) = rec.logged["residual/accel/accel_x/z_after"].strips.as_arrow_array().to_pylist()
+    ys = np.array([y for _, y in strip])
+    assert len(ys) == len(z) - 1  # τ = 4320 s lies beyond the fit's range: not drawn
+    np.testing.assert_allclose(ys[:4], [-0.6, 0.6, -0.6, 0.6])  # the scene's y points down
+    assert ys[10] == pytest.approx(-3.0)
+
+
+def test_signals_are_sent_at_their_own_times_and_enveloped_beyond_two_frames_a_bin(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, signal_frames
+) -> None:
+    import pyarrow as pa
+
+    monkeypatch.setattr(rv, "ENVELOPE_BINS", 1_000)
+    sent: list[tuple[str, list[int]]] = []
+
+    class Sender:
+        def send_columns(self, entity, indexes, columns) -> None:
+            sent.append((entity, indexes[0].as_arrow_array().cast(pa.int64()).to_pylist()))
+
+        def flush(self) -> None:
+            pass
+
+    frames = signal_frames(2_000)
+    columns = rv.signal_columns(frames)
+    rv._send_signals(Sender(), frames, columns, dict.fromkeys(frames.columns, 0.0), True)
+    expected = np.round(frames["t_s"].to_numpy() * 1e9).astype(np.int64).tolist()
+    assert sent and all(times == expected for _, times in sent)
+    whole = rv.RrdWriter(tmp_path / "whole.rrd", frames)
+    enveloped = rv.RrdWriter(tmp_path / "enveloped.rrd", signal_frames(2_001))
+    step = float(frames["t_s"][1] - frames["t_s"][0])
+    assert whole.bin_s is None  # 2 frames a bin at most: sent whole
+    assert enveloped.bin_s == pytest.approx(3 * step)  # ceil(2001 / 1000) frames a bin
+    whole.discard()
+    enveloped.discard()
+
+
+def _points(archetype: object) -> list[list[float]]:
+    """Every (x, y) an archetype draws: a Points2D's positions or a LineStrips2D's vertices."""
+    if hasattr(archetype, "positions") and archetype.positions is not None:
+        return archetype.positions.as_arrow_array().to_pylist()
+    return [p for strip in archetype.strips.as_arrow_array().to_pylist() for p in strip]
+
+
+def test_the_allan_views_labels_and_legend_lie_in_its_bounds_around_the_grid(
+    synthetic_result,
+) -> None:
+    """τ labels below the grid, σ labels left of it, the legend right of it, all inside the
+    view's bounds (what the blueprint zooms the view to)."""
+    axes = synthetic_result().by_sensor("accel")
+    rec = _KeepLogs()
+    rv._log_allan(rec, "accel", axes)
+    ext = rv.allan_extent(axes)
+    ((bounds,),) = [ext.bounds().range.as_arrow_array().to_pylist()]
+    assert bounds == {
+        "x_range": [ext.x0 - 1.1, ext.x1 + rv.LEGEND_WIDTH],
+        "y_range": [ext.top - 0.3, ext.bottom + 0.5],
+    }
+    grid = rec.logged["allan/accel/grid_labels"]
+    for label, (x, y) in zip(_labels(grid), _points(grid), strict=True):
+        if label.startswith("τ"):
+            assert ext.bottom < y < bounds["y_range"][1] and ext.x0 <= x <= ext.x1
+        else:
+            assert bounds["x_range"][0] < x < ext.x0 and ext.top <= y <= ext.bottom
+    legend = [(p, a) for p, a in rec.logged.items() if p.startswith("allan/accel/legend/")]
+    assert len(legend) == 2 * 7  # a sample and a label for each of the 7 entries
+    for _, archetype in legend:
+        for x, y in _points(archetype):
+            assert ext.x1 < x < bounds["x_range"][1] and ext.top <= y <= ext.bottom
+    centre = ext.x1 + rv.LEGEND_WIDTH / 2  # the labels centred over their samples
+    dots = _points(rec.logged["allan/accel/legend/6/sample"])  # "after loop corrections"
+    assert [x for x, _ in dots] == pytest.approx(np.linspace(centre - 1.0, centre + 1.0, 5))
+    assert _points(rec.logged["allan/accel/legend/6/label"])[0][0] == pytest.approx(centre)
+
+
+def test_the_model_before_the_loop_is_its_axis_colour_faded_halfway_to_white(
+    synthetic_result,
+) -> None:
+    rec = _KeepLogs()
+    rv._log_allan(rec, "accel", synthetic_result().by_sensor("accel"))
+    before = rec.logged["allan/accel/accel_x/model_before"].colors.as_arrow_array().to_pylist()
+    after = rec.logged["allan/accel/accel_x/model_after"].colors.as_arrow_array().to_pylist()
+    rgba = [(c >> 24, (c >> 16) & 255, (c >> 8) & 255) for c in before + after]
+    assert rgba == [(143, 187, 217), (31, 119, 180)]  # tab:blue, and halfway to white
+
+
+def test_interval_bars_span_each_finite_interval_and_legend_samples_match_their_curves(
+    synthetic_result,
+) -> None:
+    """A bar per τ whose interval is finite, from the lower to the upper end (−log10 σ in the
+    scene); each legend sample is drawn as wide as the curves it names; the views hold no
+    time (static: shown wherever the time cursor is)."""
+    axes = synthetic_result().by_sensor("accel")
+    curve = axes[0].curve
+    lo, hi = np.array(curve.adev_lo, float), np.array(curve.adev_hi, float)
+    hi[3] = np.nan  # an interval without an upper end: no bar
+    axes[0] = replace(axes[0], curve=replace(curve, adev_hi=hi))
+    rec = _KeepLogs()
+    rv._log_allan(rec, "accel", axes)
+    bars = rec.logged["allan/accel/accel_x/interval"].strips.as_arrow_array().to_pylist()
+    keep = np.flatnonzero(np.isfinite(np.log10(lo)) & np.isfinite(hi))
+    assert 3 not in keep and len(bars) == len(keep) >= len(curve.tau_s) - 3
+    for bar, k in zip(bars, keep, strict=True):
+        x = np.log10(curve.tau_s[k])
+        expected = [[x, -np.log10(lo[k])], [x, -np.log10(hi[k])]]
+        np.testing.assert_allclose(bar, expected, rtol=1e-6)  # float32 in the recording
+
+    def radius(path: str) -> float:
+        return rec.logged[path].radii.as_arrow_array().to_pylist()[0]
+
+    assert radius("allan/accel/legend/0/sample") == radius("allan/accel/accel_x/adev")
+    assert radius("allan/accel/legend/4/sample") == radius("allan/accel/accel_x/model_before")
+    assert radius("allan/accel/legend/5/sample") == radius("allan/accel/accel_x/model_after")
+    assert all(rec.static.values()) and len(rec.static) > 20
+
+
+def test_the_measured_curve_is_drawn_over_its_bars_over_the_models_over_a_thin_grid(
+    synthetic_result,
+) -> None:
+    rec = _KeepLogs()
+    rv._log_allan(rec, "accel", synthetic_result().by_sensor("accel"))
+    base = "allan/accel/accel_x"
+
+    def order(path: str) -> float:
+        return rec.logged[path].draw_order.as_arrow_array().to_pylist()[0]
+
+    def radius(path: str) -> float:  # UI points (stored negative: rerun's convention)
+        return abs(rec.logged[path].radii.as_arrow_array().to_pylist()[0])
+
+    assert order("allan/accel/grid") < order(f"{base}/model_after") < order(f"{base}/interval")
+    assert order(f"{base}/interval") < order(f"{base}/adev")
+    curves = ("adev", "interval", "model_before", "model_after")
+    assert radius("allan/accel/grid") <= min(radius(f"{base}/{c}") for c in curves)
