@@ -96,6 +96,10 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_odd_inputs.py",
     ),
     "pipeline/report/rerun_streams.py": ("tests/report/test_rerun_streams.py",),
+    "pipeline/report/datasheet.py": (
+        "tests/report/test_datasheet.py",
+        "tests/fleet/test_fleet_population.py",
+    ),
     "pipeline/report/rerun_view.py": (
         "tests/report/test_rerun_view.py",
         "tests/report/test_rerun_streams.py",
