@@ -32,7 +32,7 @@ from imupipe.fleet.population import (
 )
 from imupipe.fleet.report import md_text
 from imupipe.fleet.task import budget_for_worker
-from imupipe.report.datasheet import Spec, load_datasheet
+from imupipe.report.datasheet import Spec, load_datasheet, parse_datasheet
 from imupipe.units import RAD_PER_DEG
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -410,6 +410,10 @@ def test_spread_of_two_units_and_outliers_with_as_many_bounded_as_resolved():
         ("[gyro]\nrandom_walk = { value = 1.0, unit = 'furlong' }\n", "unit 'furlong' unknown"),
         ("[magnetometer]\nrandom_walk = { value = 1.0, unit = 'rad' }\n", "unknown section"),
         ("[gyro]\nrandom_walk = { value = -1.0, unit = 'rad' }\n", "is not a number >= 0"),
+        ("[gyro]\nrandom_walk = { value = inf, unit = 'rad' }\n", "value inf is not a number"),
+        ("[gyro]\nrandom_walk = { value = '1.0', unit = 'rad' }\n", "value '1.0' is not a"),
+        ("[gyro]\nrandom_walk = { value = 1.0 }\n", r"must be \{value = \.\.\., unit"),
+        ("[gyro]\nrandom_walk = { value = 1.0, unit = 'rad', note = 'x' }\n", "must be"),
         ("[gyro]\nrandom_walk = { value = 1.0, unit = 'rad', kind = 'min' }\n", "kind"),
         ("[gyro\n", "not TOML"),
         ("part = 'x'\n", r"no \[gyro\] or \[accel\] values"),
@@ -418,6 +422,11 @@ def test_spread_of_two_units_and_outliers_with_as_many_bounded_as_resolved():
 def test_bad_datasheet_is_one_clear_error(tmp_path, body, message):
     with pytest.raises(DatasheetError, match=message):
         _sheet(tmp_path, body)
+
+
+def test_a_datasheet_value_of_zero_is_a_value():
+    sheet = parse_datasheet("[gyro]\nrate_random_walk = { value = 0, unit = 'rad' }\n", "x")
+    assert sheet.specs[("gyro", "rate_random_walk")].value == 0.0
 
 
 def test_population_uses_terms_after_the_loop():
