@@ -129,6 +129,8 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/io/test_scale_factors.py",
         "tests/io/test_decode_contract.py",
         "tests/report/test_accel_scale_end_to_end.py",
+        "tests/recording/test_spi.py",  # the register map, SPI timing and start-up checks
+        "tests/recording/test_simulator.py",
     ),
     # the rule tests first (fast; -x stops at the first failure); tests/model/test_loop_sim.py
     # (six 3 h axes per scenario, minutes) is left out of the per-mutant run for time

@@ -89,3 +89,23 @@ def test_scales_and_rates():
     cfg = DeviceConfig()
     assert DeviceConfig.from_metadata(cfg.to_metadata()) == cfg
     assert cfg.product_id == PROD_ID_VALUE == 16364
+
+
+def test_the_simulators_diag_bits_name_what_the_datasheet_says() -> None:
+    """DIAG_STAT bit 4 is over-range and bit 1 supply high (ADIS16364 DIAG_STAT table; the Linux
+    driver's messages): what the simulator sets for a saturated axis or a high supply."""
+    from imupipe.device.adis16364 import DIAG_OVER_RANGE, DIAG_SUPPLY_HIGH, diag_flags
+
+    assert diag_flags(DIAG_OVER_RANGE) == ["sensor over-range"]
+    assert diag_flags(DIAG_SUPPLY_HIGH) == ["supply above 5.25 V"]
+    assert len(diag_flags(0xFFFF)) == 15  # every bit but the undefined bit 7
+
+
+def test_a_short_filter_for_the_gyro_range_names_the_taps_it_got() -> None:
+    from imupipe.device.adis16364 import check_sens_avg
+
+    with pytest.raises(ConfigError) as refused:
+        check_sens_avg(0x0103)  # ±75 °/s with 2³ taps: 2⁴ needed
+    assert str(refused.value) == (
+        "SENS_AVG 0x0103: the ±75 °/s range needs SENS_AVG[2:0] >= 4 (>= 16 filter taps), got 3"
+    )
