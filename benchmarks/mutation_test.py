@@ -96,6 +96,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_odd_inputs.py",
     ),
     "pipeline/report/rerun_streams.py": ("tests/report/test_rerun_streams.py",),
+    "pipeline/report/rerun_live.py": ("tests/report/test_rerun_live.py",),
     "pipeline/report/datasheet.py": (
         "tests/report/test_datasheet.py",
         "tests/fleet/test_fleet_population.py",
