@@ -98,6 +98,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     "pipeline/report/rerun_streams.py": ("tests/report/test_rerun_streams.py",),
     "pipeline/report/rerun_live.py": ("tests/report/test_rerun_live.py",),
     "pipeline/report/staging.py": (
+        "tests/report/test_staging.py",
         "tests/test_hostile.py::test_interrupted_runs_leave_the_old_output_and_no_rrd_leaves_no_stale_recording",
         "tests/test_hostile.py::test_default_out_names_do_not_collide",
         "tests/test_hostile.py::test_an_out_that_cannot_take_the_reports_is_one_line",
