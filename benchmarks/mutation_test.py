@@ -116,6 +116,9 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/io/test_decode_contract.py",
         "tests/io/test_scale_factors.py",
         "tests/io/test_ros_bags.py",
+        "tests/io/test_column_sources.py",  # the in-memory and spilled column stores
+        "tests/io/test_decode_memory.py",
+        "tests/analysis/test_lowmem.py",
     ),
     # tests/recording/test_recorder_signals.py (real signals to a real-time subprocess, ~1 min)
     # is left out: too slow per mutant; tests/recording/ covers the same paths in process
