@@ -116,7 +116,8 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/io/test_decode_contract.py",
         "tests/io/test_scale_factors.py",
         "tests/io/test_ros_bags.py",
-        "tests/io/test_column_sources.py",  # the in-memory and spilled column stores
+        "tests/io/test_column_store.py",  # the in-memory and spilled column stores
+        "tests/io/test_column_sources.py",
         "tests/io/test_decode_memory.py",
         "tests/analysis/test_lowmem.py",
     ),
