@@ -378,3 +378,48 @@ def test_segments_are_a_table_with_their_frames_and_times() -> None:
         "| 0 | 120000 | 120000 | 0 | 1199.99 |",
         "| 120001 | 360000 | 239999 | 1200.01 | 3599.99 |",
     ]
+
+
+@pytest.mark.parametrize(
+    ("window", "text"),
+    [
+        ((0.0, None), None),
+        ((10.0, None), "window from t = 10 s to the last frame (--start, --end)"),
+        ((0.0, -60.0), "window from t = 0 s to 60 s before the last frame (--start, --end)"),
+        ((0.0, -0.5), "window from t = 0 s to 0.5 s before the last frame (--start, --end)"),
+        ((5.0, 100.0), "window from t = 5 s to t = 100 s (--start, --end)"),
+    ],
+)
+def test_the_analysed_window_in_words(window, text) -> None:
+    assert report.window_text(window) == text
+
+
+def test_an_effects_interval_is_shown_only_when_it_has_both_ends() -> None:
+    assert (
+        report._params({"params": {"a": 1.0}, "intervals": {"a": [0.5, 2.0]}}) == "a = 1 [0.5, 2]"
+    )
+    assert report._params({"params": {"a": 1.0}, "intervals": {"a": [0.5]}}) == "a = 1"
+
+
+def test_the_events_section_names_the_shortest_and_longest_window_tested() -> None:
+    from types import SimpleNamespace
+
+    scales = [{"window_s": w} for w in (0.5, 1.0, 2.0, 512.0)]
+    doc = {
+        "detector": {"tests": 1200, "scales": scales, "axes": ["gyro_x"], "false_alarm": 1e-3},
+        "found": [],
+    }
+    events = SimpleNamespace(as_dict=lambda: doc)
+    (_, _, tested, _, none, _) = report._events_section(SimpleNamespace(events=events))
+    assert tested.startswith("1200 windows of 4 lengths (0.5–512 s) tested on gyro_x;")
+    assert none == "None found."
+
+
+def test_a_report_with_a_non_finite_number_is_refused_not_written(
+    tmp_path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """report.json is strict JSON: a NaN that reached the document is an error, not `NaN`."""
+    monkeypatch.setattr(report, "report_json", lambda result: {"n": math.nan})
+    with pytest.raises(ValueError, match="Out of range float values"):
+        report.write_report(None, tmp_path, figures=False)
+    assert not (tmp_path / "report.json").exists()
