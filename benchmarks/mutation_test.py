@@ -82,6 +82,14 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_odd_inputs.py",
     ),
     "pipeline/io/db3_scan.py": ("tests/io/test_db3_bags.py",),
+    "pipeline/io/rosbag2.py": (
+        "tests/io/test_ros_bags.py",
+        "tests/io/test_db3_bags.py",
+        "tests/test_hostile.py::test_rosbag2_metadata_listing_files_outside_the_bag_is_refused",
+        "tests/test_hostile.py::test_split_files_without_metadata_are_read_in_natural_order",
+        "tests/test_hostile.py::test_a_listed_file_that_is_missing_is_warned_about",
+        "tests/test_odd_inputs.py::test_rosbag2_directory_with_split_files",
+    ),
     "pipeline/io/mcap_bulk.py": (
         "tests/io/test_mcap_io.py",
         "tests/recording/test_recorder_chunks.py",
