@@ -83,6 +83,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     ),
     "pipeline/io/db3_scan.py": ("tests/io/test_db3_bags.py",),
     "pipeline/io/rosbag2.py": (
+        "tests/io/test_rosbag2_files.py",
         "tests/io/test_ros_bags.py",
         "tests/io/test_db3_bags.py",
         "tests/test_hostile.py::test_rosbag2_metadata_listing_files_outside_the_bag_is_refused",
