@@ -55,6 +55,8 @@ TEMPERATURE_SCHEMA = "sensor_msgs/msg/Temperature"
 MESSAGE_ENCODING_READ = "cdr"
 """The one message encoding read (MCAP spec, "Well-known message encodings": ``cdr``, what ROS 2
 writes); an IMU type in another (``ros1``, ``json``, ``protobuf``…) is named in the error."""
+IMU_KINDS = ("adis16364", "imu")
+"""The kinds of channel (of :func:`scan`'s schema names) that are IMU topics."""
 OTHER_IMU_SCHEMAS = ("sensor_msgs/Imu",)
 """ROS 1's name of the IMU message (schema encoding ``ros1msg``, message encoding ``ros1``: a
 ROS 1 bag converted to MCAP); not read, but named when a file has no IMU topic imupipe reads."""
@@ -696,20 +698,20 @@ def scan(
         kind = kinds.get(schema.name)
         if kind is not None and channel.message_encoding == MESSAGE_ENCODING_READ:
             return kind
-        if kind in ("adis16364", "imu") or schema.name in OTHER_IMU_SCHEMAS:
+        if kind in IMU_KINDS or schema.name in OTHER_IMU_SCHEMAS:
             unread_imu.setdefault(
                 channel.topic, f"{schema.name} in {channel.message_encoding!r} encoding"
             )
         return None
 
     def layout(channel: Channel, schema: Schema | None) -> CdrLayout | None:
-        if read_kind(channel, schema) is None:
+        if (read := read_kind(channel, schema)) is None:
             return None
-        kind = topic_kind.setdefault(channel.topic, kinds[schema.name])
-        if kind != kinds[schema.name]:  # its messages cannot share one set of columns
+        kind = topic_kind.setdefault(channel.topic, read)
+        if kind != read:  # its messages cannot share one set of columns
             raise InputError(
                 f"{path}: topic {channel.topic!r} carries two message types "
-                f"({kind} and {kinds[schema.name]}); refusing to mix them"
+                f"({kind} and {read}); refusing to mix them"
             )
         return LAYOUTS[kind]
 
@@ -784,7 +786,7 @@ def scan(
         f"{topic}: {count} malformed messages (size does not match the schema) skipped"
         for topic, count in malformed.items()
     )
-    imu_topics = sorted(t for t, k in topic_kind.items() if k in ("adis16364", "imu"))
+    imu_topics = sorted(t for t, k in topic_kind.items() if k in IMU_KINDS)
     if not imu_topics:
         listed = ", ".join(sorted(all_topics)) if all_topics else "none"
         unread = "; ".join(f"{t} is {why}" for t, why in sorted(unread_imu.items()))
