@@ -172,6 +172,33 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/model/test_effects_full_rate.py",
         "tests/model/test_loop.py",
     ),
+    "pipeline/escape.py": (
+        "tests/report/test_datasheet.py",
+        "tests/report/test_report_text.py",
+        "tests/test_hostile.py",
+    ),
+    "pipeline/report/paper.py": ("tests/report/test_report.py", "tests/test_units.py"),
+    "pipeline/analysis/results.py": (
+        "tests/test_api.py",
+        "tests/analysis/test_final_model.py",
+        "tests/report/test_report.py",
+        "tests/report/test_report_text.py",
+    ),
+    "pipeline/io/info.py": (
+        "tests/io/test_mcap_io.py",
+        "tests/io/test_db3_bags.py",
+        "tests/test_odd_inputs.py",
+    ),
+    "pipeline/recording/noise.py": (
+        "tests/recording/test_simulator.py",
+        "tests/recording/test_scenario.py",
+    ),
+    "pipeline/report/figures.py": (
+        "tests/report/test_figure_labels.py",
+        "tests/report/test_figures_workers.py",
+        "tests/report/test_loop_figure.py",
+    ),
+    "pipeline/report/outputs.py": ("tests/test_api.py", "tests/report/test_report.py"),
 }
 
 
