@@ -48,6 +48,25 @@ JITTER_SIGMAS = 6.0
 step (1.4826 × median absolute deviation) to count as a gap."""
 JITTER_WARN = 0.1
 """Warn when the rms stamp jitter exceeds this fraction of the period."""
+SPAN_ROWS = 240
+"""Jittery stamps: the sample period is the median of their steps over spans of this many rows.
+Samples stamped together in bursts (two or three a USB frame, …) still span whole periods
+there, where single steps read ~0 or a few periods: 240 is a multiple of every burst length up
+to 6 and of 8, 10, 12, 15 and 16, so such spans hold whole bursts."""
+BURST_ROWS = 16
+"""Longest burst of samples stamped together that a lost frame is placed across
+(:func:`_envelope_places`)."""
+ENVELOPE_ROWS = 64
+"""Jittery stamps without a frame counter: rows per block whose low quantile of lateness (the
+stamp minus its place on a uniform grid) tells the block's level; a lost frame raises the level
+of every later block by one period."""
+ENVELOPE_QUANTILE = 0.1
+"""The quantile of a block's lateness that is its level: below the late tail (a stamp held up by
+the host, the later samples of a burst) and above the few stamps that came early."""
+DRIFT_BLOCKS = 32
+"""Blocks either side whose median level change is the clock's drift (the host's and the
+sensor's clocks differ by ppm; a rate drifting by a few % in a slow host timer), told apart
+from a lost frame's one-period step in one block."""
 MAX_MASKED_FRACTION = 0.5
 """Policy ``"mask"``: beyond this excluded fraction of the grid, the longest segment is used."""
 
@@ -274,13 +293,22 @@ def _nominal_rate(rec: ImuRecording, t: np.ndarray) -> float:
 RATE_BLOCK = 256
 """Stamp steps per block whose median follows the sample rate (a gap or a bad stamp in a block
 does not move its median)."""
+RATE_SPANS = 16
+"""Spans of :data:`SPAN_ROWS` rows whose median step follows the rate of jittery stamps."""
 RATE_CHANGE = 0.1
 """Blocks whose median steps differ by more than this fraction are at different rates."""
 
 
-def _block_median_steps(t: np.ndarray) -> np.ndarray:
+def _block_median_steps(t: np.ndarray, spans: bool = False) -> np.ndarray:
     """Median stamp step of each block of :data:`RATE_BLOCK` steps (the last partial block
-    left out), :data:`_CHUNK` steps at a time (a multiple of the block)."""
+    left out), :data:`_CHUNK` steps at a time (a multiple of the block); with ``spans``, the
+    median step over each :data:`RATE_SPANS` spans of :data:`SPAN_ROWS` rows (jittery or
+    bursty stamps, whose single steps tell no rate)."""
+    if spans:  # RATE_SPANS spans a block
+        steps = np.diff(t[::SPAN_ROWS]) / SPAN_ROWS
+        per = RATE_SPANS
+        k = len(steps) // per
+        return robust.row_medians(steps[: k * per].reshape(k, per))
     parts = []
     for i in range(0, len(t) - 1, _CHUNK):
         steps = np.diff(t[i : min(i + _CHUNK, len(t) - 1) + 1])
@@ -289,15 +317,16 @@ def _block_median_steps(t: np.ndarray) -> np.ndarray:
     return np.concatenate(parts) if parts else np.empty(0)
 
 
-def rate_regimes(t: np.ndarray) -> list[tuple[int, int, float]]:
+def rate_regimes(t: np.ndarray, spans: bool = False) -> list[tuple[int, int, float]]:
     """The parts of a recording at one sample rate: (first row, stop row, median step in s)
     each, in order; one part unless the block median step (:func:`_block_median_steps`) jumps
     by more than :data:`RATE_CHANGE` between neighbouring blocks and stays there for at least
-    two blocks (a rate switched from 200 to 100 Hz).  A slow drift of the rate is one part.
+    two blocks (a rate switched from 200 to 100 Hz); ``spans``: steps read over spans
+    (:func:`_block_median_steps`).  A slow drift of the rate is one part.
     A block whose median step is not positive (stamps repeated or going back) tells no rate:
     it takes its predecessor's (the first positive one's at the start), and the stamps
     themselves are left to the segment cuts (:func:`condition`)."""
-    medians = _block_median_steps(t)
+    medians = _block_median_steps(t, spans)
     told = np.flatnonzero(medians > 0)
     if len(medians) < 4 or not told.size:
         return [(0, len(t), float(np.median(np.diff(t))) if len(t) > 1 else np.nan)]
@@ -414,6 +443,106 @@ def _grid_places(
     return np.concatenate(([0], np.cumsum(step))), uncertain
 
 
+def _scatter(t: np.ndarray) -> tuple[float, float]:
+    """(the median stamp step over spans of :data:`SPAN_ROWS` rows (s; the mean step with
+    fewer than three spans), the robust sigma of
+    the single steps about it over it): the sample period of stamps that jitter or come in
+    bursts (one span a gap touches does not move the median), and how much they scatter (a
+    host's receive times: tens of %; bursts of samples stamped together: their steps ~0 and a
+    few periods, over 100 %)."""
+    spans = np.diff(t[::SPAN_ROWS]) / SPAN_ROWS
+    period = float(np.median(spans)) if spans.size >= 3 else (t[-1] - t[0]) / (len(t) - 1)
+    if not period > 0:
+        return period, 0.0
+    return period, robust.MAD_TO_SIGMA * robust.mad(t, period, differences=True) / period
+
+
+def _lateness(
+    t: np.ndarray, period: float, start: int, stop: int, drift: np.ndarray | None = None
+) -> np.ndarray:
+    """Rows ``start:stop``: how late each stamp is against a uniform grid from the first row,
+    in periods, ``(t[k] − t[0]) / period − k``; less the clock's drift if given (``drift[b]``:
+    the level change from block b to b + 1 of :data:`ENVELOPE_ROWS` rows, a line through
+    their centres)."""
+    rows = np.arange(start, stop)
+    late = (t[start:stop] - t[0]) / period - rows
+    if drift is not None:
+        w = ENVELOPE_ROWS
+        block = rows // w
+        at_centre = np.concatenate(([0.0], np.cumsum(drift[:-1])))
+        late -= at_centre[block] + drift[block] * (rows - block * w - w / 2) / w
+    return late
+
+
+def _block_levels(t: np.ndarray, period: float, drift: np.ndarray | None = None) -> np.ndarray:
+    """Each block of :data:`ENVELOPE_ROWS` rows' :data:`ENVELOPE_QUANTILE` quantile of
+    :func:`_lateness` (the last block may be short), :data:`_CHUNK` rows at a time."""
+    w = ENVELOPE_ROWS
+    levels = np.empty(-(-len(t) // w))
+    for i in range(0, len(t), _CHUNK):  # _CHUNK is a multiple of the block
+        u = _lateness(t, period, i, min(i + _CHUNK, len(t)), drift)
+        full = len(u) // w
+        levels[i // w : i // w + full] = np.quantile(
+            u[: full * w].reshape(full, w), ENVELOPE_QUANTILE, axis=1
+        )
+        if full * w < len(u):
+            levels[-1] = np.quantile(u[full * w :], ENVELOPE_QUANTILE)
+    return levels
+
+
+def _drift(levels: np.ndarray) -> np.ndarray:
+    """Per block, the level change a drifting clock rate makes: the running median of the
+    changes over :data:`DRIFT_BLOCKS` blocks either side (the last block: its predecessor's)."""
+    change = robust.running_median(np.diff(levels)[:, None], DRIFT_BLOCKS)[:, 0]
+    return np.append(change, change[-1])
+
+
+def _envelope_places(t: np.ndarray, period: float) -> np.ndarray:
+    """Grid place of each row (int64, first row 0) of jittery stamps without a frame counter.
+
+    Rounding each step to periods (:func:`_grid_places`) fails on such stamps: a late stamp
+    followed by an early one reads as a lost frame and a duplicate, and the errors add up (a
+    host's receive times, 30 % of a period of latency, put 360 000 frames on a grid of 370 000
+    with 3 % of it masked).  Here the frames keep their order and the stamps only say where
+    frames were lost: the level of each block's lateness (:func:`_block_levels`) steps up by m
+    periods where m frames are missing, while latency, bursts and a drifting clock rate leave
+    it in place (the clock's drift, :func:`_drift`, is taken out of the lateness before the
+    levels are read again, and what is left of it is not counted).  A step is placed at the
+    first row from which the lateness' forward minimum over :data:`BURST_ROWS` rows stays above
+    the old level plus m − ½ (a frame at a time): the row before a lost frame may be placed
+    late by one where stamps come in bursts (nothing tells the two apart).  A level falling
+    (more frames than time: a clock stepped back, a message recorded twice) keeps the frames
+    in order."""
+    n, w = len(t), ENVELOPE_ROWS
+    if n <= w:
+        return np.arange(n, dtype=np.int64)
+    drift = _drift(_block_levels(t, period))
+    levels = _block_levels(t, period, drift)
+    step = np.diff(levels) - _drift(levels)[:-1]
+    # a loss inside a block moves that block's level part of the way: the changes of
+    # neighbouring blocks that moved by a quarter period or more are one loss, their sum
+    moved = np.abs(step) >= 0.25
+    starts = np.flatnonzero(moved & ~np.concatenate(([False], moved[:-1])))
+    stops = np.flatnonzero(moved & ~np.concatenate((moved[1:], [False]))) + 1
+    missing = np.zeros(n + 1, dtype=np.int64)  # frames lost just before each row
+    for b, e in zip(starts.tolist(), stops.tolist(), strict=True):  # blocks b..e, their changes
+        lost = int(np.rint(step[b:e].sum()))
+        if lost <= 0:
+            continue
+        lo, hi = max(b - 1, 0) * w, min((e + 1) * w, n)  # from the block before, all early
+        excess = _lateness(t, period, lo, hi, drift) - levels[b]
+        ahead = np.pad(excess, (0, BURST_ROWS - 1), mode="edge")
+        floor = np.lib.stride_tricks.sliding_window_view(ahead, BURST_ROWS).min(axis=1)
+        base = float(np.median(floor[: w // 2])) if b > 0 else 0.0
+        split = -1  # each lost frame where the floor passes its level (one gap: a burst apart)
+        for level in range(1, lost + 1):
+            before = np.flatnonzero(floor < base + level - 0.5)
+            row = int(before[-1]) + 1 if before.size else 0
+            split = split if 0 <= split and row - split <= BURST_ROWS else row
+            missing[lo + split] += 1
+    return np.arange(n, dtype=np.int64) + np.cumsum(missing[:n])
+
+
 def _within(by_counter: np.ndarray, by_stamps: np.ndarray) -> np.ndarray:
     """Counter steps that agree with stamp steps (both in periods) within one sample or 1 %."""
     return np.abs(by_counter - by_stamps) <= np.maximum(1, by_stamps // 100)
@@ -475,7 +604,16 @@ def condition(
             f"{named_frames(rec)}) among its first {FRAME_ID_SAMPLE}: if several IMUs publish on "
             "it, they are analysed as one stream (give each its own topic)"
         )
-    regimes = rate_regimes(df["t_s"].to_numpy())
+    counter = df["counter"].to_numpy() if df["counter"].null_count() == 0 else None
+    # stamps that scatter (a host's receive times, bursts) and no frame counter to place them;
+    # not messages of several frames (several IMUs on the topic stamp in pairs or sets too)
+    jittery = (
+        counter is None
+        and len(rec.frame_ids) <= 1
+        and n > 2 * ENVELOPE_ROWS
+        and _scatter(df["t_s"].to_numpy())[1] > JITTER_WARN
+    )
+    regimes = rate_regimes(df["t_s"].to_numpy(), spans=jittery)
     if len(regimes) > 1:  # analyse the longest part at one rate, as if the rest were a gap
         first, stop, step = max(regimes, key=lambda r: r[1] - r[0])
         rates = ", ".join(f"{1 / r[2]:.4g} Hz from frame {r[0] + offset}" for r in regimes)
@@ -488,7 +626,15 @@ def condition(
         offset += first
         n = df.height
     t = df["t_s"].to_numpy()
-    rate = _nominal_rate(rec, t)
+    counter = df["counter"].to_numpy() if df["counter"].null_count() == 0 else None
+    mad_sigma = robust.MAD_TO_SIGMA * robust.mad(t, differences=True)
+    if jittery:  # the part at one rate, again
+        span_period, scatter = _scatter(t)
+        jittery = n > 2 * ENVELOPE_ROWS and scatter > JITTER_WARN
+    if jittery and "output_rate_hz" not in rec.device:
+        rate = 1.0 / span_period
+    else:
+        rate = _nominal_rate(rec, t)
     period = 1.0 / rate
 
     if "nonfinite" in df.columns:  # a frame decoded without its axes (imupipe.io.columns)
@@ -502,10 +648,19 @@ def condition(
     nonfinite = (bits & ~absent_bits) != 0
     del bits
     saturated = df["saturated"].to_numpy()
-    mad_sigma = robust.MAD_TO_SIGMA * robust.mad(t, differences=True)
     threshold = max(GAP_FACTOR * period, period + JITTER_SIGMAS * mad_sigma)
-    counter = df["counter"].to_numpy() if df["counter"].null_count() == 0 else None
     breaks, counts = _breaks(t, counter, threshold, period)
+    places = None
+    if jittery:  # frames in order; breaks only where the stamps' envelope says frames were lost
+        places = _envelope_places(t, period)
+        if "output_rate_hz" not in rec.device:  # no rate but the stamps': theirs, now placed
+            rate = places[-1] / (t[-1] - t[0])
+            period = 1.0 / rate
+        lost = np.diff(places) - 1
+        breaks[1:n] = lost > 0
+        counts["gaps"] = int(np.count_nonzero(lost))
+        counts["missed_frames"] = int(places[-1] - (n - 1))
+        del lost
     counts.update(
         {
             "frames": n,
@@ -539,6 +694,15 @@ def condition(
         "flagged_frames": "frame(s) with the EA (error/alarm) flag set",
         "stale_frames": "frame(s) without the ND (new data) flag: the same sample read twice",
     }
+    if jittery:
+        unordered = counts["duplicate_stamps"] + counts["non_monotonic_stamps"]
+        del describe["duplicate_stamps"], describe["non_monotonic_stamps"]
+        warnings.append(
+            f"stamps scatter by {100 * scatter:.0f} % of the sample period (a host's "
+            f"receive times, or samples stamped in bursts; {unordered} not after the one "
+            "before): frames are kept in their order on the mean period, and frames lost are "
+            "found where the stamps' lower envelope steps up by whole periods"
+        )
     for key, text in describe.items():
         if counts[key]:
             warnings.append(f"{counts[key]} " + text.format(**counts))
@@ -546,7 +710,9 @@ def condition(
     chosen = int(np.argmax([s.frames for s in segments]))
     seg = segments[chosen]
     if gaps in ("mask", "auto") and len(segments) > 1:
-        masked = _masked_series(t, counter, period, bad_row, segments, chosen, counts, offset)
+        masked = _masked_series(
+            t, counter, period, bad_row, segments, chosen, counts, offset, places
+        )
         longest_gap_s = None if masked is None else _longest_run(masked.excluded) * masked.tau0_s
         if masked is not None and (gaps == "mask" or longest_gap_s <= AUTO_MAX_GAP_S):
             return replace(
@@ -581,7 +747,7 @@ def condition(
     if seg.frames > 2:
         jitter = _step_jitter(seg_t) / tau0
         counts["jitter_ppm"] = round(jitter * 1e6)
-        if jitter > JITTER_WARN:
+        if jitter > JITTER_WARN and not jittery:  # (jittery: said above)
             warnings.append(
                 f"stamp jitter is {100 * jitter:.0f} % of the sample period: samples are treated "
                 "as equally spaced at the mean period"
@@ -613,11 +779,16 @@ def _masked_series(
     chosen: int,
     counts: dict[str, int],
     offset: int,
+    places: np.ndarray | None = None,
 ) -> ConditionedSeries | None:
     """Policy ``"mask"``: the whole recording (its part at one rate, from row ``offset``: the
     rows of ``t``) on its sample grid, or None if more than :data:`MAX_MASKED_FRACTION` of the
-    grid would be excluded."""
-    place, uncertain = _grid_places(t, counter, period)
+    grid would be excluded.  ``places``: the rows' grid places when they were found already
+    (jittery stamps, :func:`_envelope_places`; every row's place then certain)."""
+    if places is None:
+        place, uncertain = _grid_places(t, counter, period)
+    else:
+        place, uncertain = places, np.zeros(len(t), dtype=bool)
     usable_row = ~(bad_row | uncertain)
     grid = int(place[-1]) + 1
     if grid - int(usable_row.sum()) > MAX_MASKED_FRACTION * grid:  # told before allocating:
@@ -632,6 +803,14 @@ def _masked_series(
     counts["masked_samples"] = n_excluded
     counts["grid_samples"] = len(excluded)
     warnings = [_mask_warning(len(excluded), n_excluded, len(t))]
+    clean = _longest_run(~excluded)
+    if 8 * clean < len(excluded):  # no term of τ ≥ T/8 (the long-τ fit's) is free of them
+        warnings.append(
+            f"the longest run of samples with none masked is {clean} ({clean * tau0:.4g} s of "
+            f"{len(excluded) * tau0:.4g} s): the Allan variance stops at τ = "
+            f"{(clean - 1) // 2 * tau0:.4g} s, and noise terms that show only at longer τ "
+            "(bias instability, rate random walk) cannot be told from this recording"
+        )
     if abs(tau0 / period - 1) > 1e-3:
         warnings.append(
             f"measured mean rate {1 / tau0:.4f} Hz differs from the nominal {1 / period:g} Hz; "

@@ -592,6 +592,8 @@ class _Axis:
                 y, tau0, excluded = self.sig.y, self.sig.tau0, self.sig.excluded
                 self._spike_avar = oadev(y, tau0, m, cand.spikes, excluded)[0] ** 2
             return self._spike_avar.copy()
+        if self.m_d.size == 0:  # no τ of the curve reaches a block (a grid masked that often)
+            return state.avar.copy()
         if state.avar_d is None:
             state.avar_d = oadev(state.y_d, self.dt, self.m_d, excluded=self.excluded_d)[0] ** 2
         avar_d = oadev(state.y_d - cand.correction, self.dt, self.m_d, excluded=self.excluded_d)
