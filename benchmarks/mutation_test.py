@@ -177,7 +177,11 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/report/test_report_text.py",
         "tests/test_hostile.py",
     ),
-    "pipeline/report/paper.py": ("tests/report/test_report.py", "tests/test_units.py"),
+    "pipeline/report/paper.py": (
+        "tests/report/test_paper_table.py",
+        "tests/report/test_report.py",
+        "tests/test_units.py",
+    ),
     "pipeline/analysis/results.py": (
         "tests/test_api.py",
         "tests/analysis/test_final_model.py",
