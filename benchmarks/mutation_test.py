@@ -183,6 +183,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_units.py",
     ),
     "pipeline/analysis/results.py": (
+        "tests/report/test_results_contract.py",
         "tests/test_api.py",
         "tests/analysis/test_final_model.py",
         "tests/report/test_report.py",
