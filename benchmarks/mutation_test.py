@@ -190,6 +190,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/report/test_report_text.py",
     ),
     "pipeline/io/info.py": (
+        "tests/io/test_info.py",
         "tests/io/test_mcap_io.py",
         "tests/io/test_db3_bags.py",
         "tests/test_odd_inputs.py",
