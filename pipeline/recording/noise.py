@@ -3,7 +3,8 @@
 Every generator draws its randomness from a :class:`NormalStream`, whose standard normals are
 cut from fixed-size chunks keyed by ``(seed, key, chunk index)``, and carries its filter state
 from one call to the next.  The output therefore depends only on the seed and the sample index,
-never on how a run is split into blocks: ``take(10)`` then ``take(5)`` equals ``take(15)``.
+never on how a run is split into blocks: ``take(10)`` then ``take(5)`` equals ``take(15)``
+(to the last bit; the rate random walk's running sum, restarted from its state, to rounding).
 
 Units: a generator's output has the unit of its coefficient's numerator (°/s for gyros, mg
 for accelerometers in this project).  Coefficients follow IEEE Std 952-1997, Annex C:
@@ -132,5 +133,7 @@ class FlickerNoise:
         self._stream = stream
 
     def take(self, n: int) -> np.ndarray:
+        if n == 0:  # (sosfilt refuses an empty input with its state)
+            return np.empty(0)
         out, self._zi = signal.sosfilt(self.sos, self._stream.take(n), zi=self._zi)
         return out

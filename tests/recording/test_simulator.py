@@ -162,10 +162,38 @@ def test_rate_random_walk_and_gauss_markov():
     assert lag == pytest.approx(math.exp(-1.0), abs=0.05)
 
 
-def test_generators_block_independent():
-    a = FlickerNoise(1.0, 0.01, NormalStream(4, 1))
-    b = FlickerNoise(1.0, 0.01, NormalStream(4, 1))
-    assert np.array_equal(a.take(100_000), np.concatenate([b.take(70_001), b.take(29_999)]))
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: FlickerNoise(1.0, 0.01, NormalStream(4, 1)),
+        lambda: GaussMarkov(2.0, 5.0, 0.01, NormalStream(4, 3)),
+        lambda: RateRandomWalk(0.1, 0.01, NormalStream(4, 2)),
+    ],
+    ids=["flicker", "gauss_markov", "rate_random_walk"],
+)
+def test_generators_block_independent(make):
+    """Each generator's output depends on the sample index only: its state carried from one
+    block to the next is the last sample's (the module's contract)."""
+    a, b = make(), make()
+    whole = a.take(100_000)
+    parts = [b.take(70_001), b.take(0), b.take(1), b.take(29_998)]
+    if isinstance(a, RateRandomWalk):  # a running sum restarted from its state: to rounding
+        np.testing.assert_allclose(np.concatenate(parts), whole, rtol=1e-13, atol=0)
+    else:
+        assert np.array_equal(whole, np.concatenate(parts))
+
+
+def test_flicker_poles_two_per_decade_with_zeros_between():
+    """Keshner's cascade as the docstring states it: poles log-spaced at two per decade from
+    f_lo up to the Nyquist frequency, each zero half a spacing (10^¼) above its pole."""
+    dt = 0.01
+    flicker = FlickerNoise(1.0, dt, NormalStream(0, 1), f_lo_hz=1e-6)
+    f_pole = -np.log(-flicker.sos[:, 4]) / (2 * np.pi * dt)
+    f_zero = -np.log(-flicker.sos[:, 1] / flicker.sos[:, 0]) / (2 * np.pi * dt)
+    np.testing.assert_allclose(f_pole[1:] / f_pole[:-1], 10**0.5, rtol=1e-9)
+    np.testing.assert_allclose(f_zero / f_pole, 10**0.25, rtol=1e-9)
+    assert f_pole[0] == pytest.approx(1e-6, rel=1e-9)
+    assert f_pole[-1] * 10**0.5 <= 0.5 / dt < f_pole[-1] * 10  # the last a spacing below
 
 
 # ---- registers, flags, effects -------------------------------------------------------------
