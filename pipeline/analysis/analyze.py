@@ -165,18 +165,20 @@ def axis_result(
     loop: bool,
     excluded: np.ndarray | None = None,
     searched: OutlierSearch | None = None,
+    bridged: np.ndarray | None = None,
 ) -> AxisResult:
     """Stage 4 (+ loop) of one axis: outliers excised (:func:`excise_outliers`), mean, rms, the
     closed loop and the final model (the loop's, or the IEEE 952 fit without the loop), both
     fitted on ``curve`` (up to T/2, :data:`FIT_MIN_TERMS`) and published up to T/4
     (``temp_d``, ``supply_d``: the segment's temperature and supply as
     :func:`imupipe.model.loop.aux_block_means`; ``excluded``: the samples masked by the
-    ``"mask"`` gap policy, left out of mean and rms too; ``searched``: the outlier search
-    already made on this very ``y``, else it is made here)."""
+    ``"mask"`` gap policy, left out of mean and rms too, as the ``bridged`` ones are;
+    ``searched``: the outlier search already made on this very ``y``, else it is made here)."""
     sensor = sensor_of(name)
-    usable = None if excluded is None else ~excluded
+    masked = excluded if bridged is None else bridged if excluded is None else excluded | bridged
+    usable = None if masked is None else ~masked
     found = spike_candidate(y, tau0_s, excluded) if searched is None else searched.found
-    y, curve, outliers = excise_outliers(y, tau0_s, curve, excluded, found)
+    y, curve, outliers = excise_outliers(y, tau0_s, curve, excluded, found, bridged)
     signals = AxisSignals(
         name, sensor, y, tau0_s, temp_d, supply_d, excluded, spike_free=outliers is None
     )
@@ -209,6 +211,7 @@ def excise_outliers(
     curve: AllanCurve,
     excluded: np.ndarray | None,
     found: Candidate | None,
+    bridged: np.ndarray | None = None,
 ) -> tuple[np.ndarray, AllanCurve, dict | None]:
     """Outliers ``found`` in ``y`` (:func:`imupipe.model.effects.spike_candidate`: beyond a
     family-wise, LSB- and tail-aware limit from the local median) replaced by their local
@@ -221,7 +224,7 @@ def excise_outliers(
     y = y.copy()
     y[fix.index] -= fix.value
     m = np.round(curve.tau_s / tau0_s).astype(np.int64)
-    (curve,) = allan_curves([y], tau0_s, m, excluded=excluded)
+    (curve,) = allan_curves([y], tau0_s, m, excluded=excluded, bridged=bridged)
     ev = found.evidence
     return (
         y,
@@ -352,11 +355,11 @@ def analyze_axes(
             if why is not None:
                 return why
             filled = y if found is None else fill_excised(y, found)
-            curve = allan_curves([filled], tau0, m, excluded=excluded)[0]
+            curve = allan_curves([filled], tau0, m, excluded=excluded, bridged=series.bridged)[0]
             kernels_ready()
             return axis_result(
                 name, filled, curve, tau0, aux["temp_c"], aux["supply_v"], options.loop,
-                excluded, searched.get(name) if filled is y else None,
+                excluded, searched.get(name) if filled is y else None, series.bridged,
             )  # fmt: skip
 
         results: dict[str, AxisResult] = {}

@@ -70,6 +70,15 @@ from a lost frame's one-period step in one block."""
 MAX_MASKED_FRACTION = 0.5
 """Policy ``"mask"``: beyond this excluded fraction of the grid, the longest segment is used."""
 
+BRIDGE_RUN = 5
+"""Runs of at most this many masked samples (lost messages, a NaN frame) that the Allan variance
+reads as their fill at the τ where skipping them would leave fewer than half its terms, when
+skipping them leaves no term of τ ≥ T/8 (frames lost every few seconds: a busy recorder
+dropping messages; :func:`imupipe.stats.allan.allan_curves`, ``bridged``)."""
+BRIDGE_MAX_FRACTION = 0.02
+"""Most of the grid that is bridged so: the fill carries no noise, so at those τ a white
+noise' Allan variance reads low by about the bridged fraction (measured:
+docs/gaps_and_outliers.md)."""
 AUTO_MAX_GAP_S = 3600.0
 """Policy ``"auto"``: the longest gap (run of excluded grid samples, s) it masks; a longer one
 makes it analyse the longest clean segment.  Measured on independent-generator recordings of
@@ -122,7 +131,11 @@ class ConditionedSeries:
     """Policy ``"mask"``: the recording's first row on the grid (the first of the part at one
     rate the analysis keeps, :func:`rate_regimes`)."""
     excluded: np.ndarray | None = None
-    """Policy ``"mask"``: bool (grid samples,) True where no usable sample exists."""
+    """Policy ``"mask"``: bool (grid samples,) True where no usable sample exists and no term
+    of the Allan variance may reach (all of them but the :attr:`bridged` ones)."""
+    bridged: np.ndarray | None = None
+    """Policy ``"mask"``: bool (grid samples,) the short runs without a usable sample that the
+    Allan variance reads as their fill (:data:`BRIDGE_RUN`), or None."""
     absent_axes: tuple[str, ...] = ()
     """Axes NaN/inf in every frame, which the sensor does not provide: not analysed
     (:data:`ABSENT`), and their NaN/inf does not make a frame bad."""
@@ -164,13 +177,14 @@ class ConditionedSeries:
 
     def on_grid(self, values: np.ndarray) -> np.ndarray:
         """A column of :attr:`rows` as the analysed series: itself (no mask), else float64 on
-        the grid, excluded samples filled by :func:`fill_runs` over :data:`FILL_SPAN_S` (only
-        for the time-domain steps; the Allan variance never reads them)."""
+        the grid, excluded and bridged samples filled by :func:`fill_runs` over
+        :data:`FILL_SPAN_S` (the Allan variance reads only the bridged ones' fill)."""
         if self.excluded is None or self.grid_index is None:
             return values
         out = np.empty(len(self.excluded))
         out[self.grid_index] = values
-        fill_runs(out, self.excluded, max(1, round(FILL_SPAN_S / self.tau0_s)))
+        holes = self.excluded if self.bridged is None else self.excluded | self.bridged
+        fill_runs(out, holes, max(1, round(FILL_SPAN_S / self.tau0_s)))
         return out
 
 
@@ -548,6 +562,40 @@ def _within(by_counter: np.ndarray, by_stamps: np.ndarray) -> np.ndarray:
     return np.abs(by_counter - by_stamps) <= np.maximum(1, by_stamps // 100)
 
 
+def _bridge(
+    excluded: np.ndarray, clean: int, tau0: float, warnings: list[str]
+) -> tuple[np.ndarray | None, int]:
+    """The short runs of ``excluded`` (at most :data:`BRIDGE_RUN` samples) for the Allan variance
+    to read as their fill, and the longest run of samples the rest leaves clean; (None,
+    ``clean``) if they are over :data:`BRIDGE_MAX_FRACTION` of the grid or bridging them
+    lengthens no run.  Says so in ``warnings``."""
+    runs = clean_runs(~excluded)  # the runs of excluded samples, [start, stop)
+    short = runs[runs[:, 1] - runs[:, 0] <= BRIDGE_RUN]
+    count = int(np.sum(short[:, 1] - short[:, 0]))
+    if count > BRIDGE_MAX_FRACTION * len(excluded) or not len(short):
+        return None, clean
+    bridged = np.zeros(len(excluded), dtype=bool)
+    bridged[np.repeat(short[:, 0], short[:, 1] - short[:, 0]) + _offsets(short)] = True
+    longest = _longest_run(~(excluded & ~bridged))
+    if longest <= clean:
+        return None, clean
+    warnings.append(
+        f"{count} masked samples in {len(short)} runs of at most {BRIDGE_RUN} "
+        f"({100 * count / len(excluded):.3g} % of the grid) are read by the Allan variance as "
+        f"their fill where skipping them would leave fewer than half its terms: skipped, no "
+        f"term longer than {clean} samples ({clean * tau0:.4g} s) would be free of them, now "
+        f"{longest} ({longest * tau0:.4g} s); the fill carries no noise, so there a white "
+        f"noise' Allan variance reads low by about {100 * count / len(excluded):.2g} %"
+    )
+    return bridged, longest
+
+
+def _offsets(runs: np.ndarray) -> np.ndarray:
+    """0, 1, …, length − 1 for each [start, stop) run of ``runs``, concatenated."""
+    length = runs[:, 1] - runs[:, 0]
+    return np.arange(int(length.sum())) - np.repeat(np.cumsum(length) - length, length)
+
+
 def _mask_warning(series_samples: int, excluded: int, n: int) -> str:
     return (
         f"analysing the whole recording on a uniform grid of {series_samples} samples with "
@@ -804,7 +852,10 @@ def _masked_series(
     counts["grid_samples"] = len(excluded)
     warnings = [_mask_warning(len(excluded), n_excluded, len(t))]
     clean = _longest_run(~excluded)
+    bridged = None
     if 8 * clean < len(excluded):  # no term of τ ≥ T/8 (the long-τ fit's) is free of them
+        bridged, clean = _bridge(excluded, clean, tau0, warnings)
+    if 8 * clean < len(excluded):
         warnings.append(
             f"the longest run of samples with none masked is {clean} ({clean * tau0:.4g} s of "
             f"{len(excluded) * tau0:.4g} s): the Allan variance stops at τ = "
@@ -825,5 +876,6 @@ def _masked_series(
         warnings=tuple(warnings),
         grid_index=place,
         grid_start=offset,
-        excluded=excluded,
+        excluded=excluded if bridged is None else excluded & ~bridged,
+        bridged=bridged,
     )

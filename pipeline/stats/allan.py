@@ -402,6 +402,7 @@ def allan_curves(
     correction: SparseCorrection | None = None,
     excluded: np.ndarray | None = None,
     stable32_noise_id: bool = False,
+    bridged: np.ndarray | None = None,
 ) -> list[AllanCurve]:
     """Overlapping ADEV with Stable32-style intervals for each axis of ``y`` (see :data:`Rates`).
 
@@ -413,8 +414,14 @@ def allan_curves(
     ``confidence`` (0.683, Stable32's default).  ``excluded`` (bool (n,)): the gap-tolerant
     estimate (module docstring); factors without any term are left out, the edf
     is :func:`edf_runs`, and the noise type is identified on the phase held flat across the
-    excluded samples.
+    excluded samples.  ``bridged`` (bool (n,)): more samples the estimate skips as it skips
+    ``excluded`` at the shorter τ, where that leaves at least half the terms of a record without
+    any, and reads (as the values ``y`` holds there, their fill) at the longer τ, where it would
+    leave fewer (short runs of lost samples, :class:`imupipe.analysis.condition.ConditionedSeries`).
     """
+    if bridged is not None and bridged.any():
+        return _bridged_curves(y, tau0, m, confidence, correction, excluded, bridged,
+                               stable32_noise_id)  # fmt: skip
     cols = _columns(y)
     n = len(cols[0])
     runs = _runs_of(excluded, n)
@@ -440,3 +447,41 @@ def allan_curves(
             lo, hi = chi2_interval(adev[:, i], edf, confidence)
             curves.append(AllanCurve(m * tau0, adev[:, i], lo, hi, edf, n_terms, alpha, confidence))
     return curves
+
+
+def _bridged_curves(
+    y: Rates,
+    tau0: float,
+    m: np.ndarray | None,
+    confidence: float,
+    correction: SparseCorrection | None,
+    excluded: np.ndarray | None,
+    bridged: np.ndarray,
+    stable32_noise_id: bool,
+) -> list[AllanCurve]:
+    """:func:`allan_curves` with ``bridged`` samples skipped at the shorter τ (a prefix of the
+    factors: at least half of the N + 1 − 2m terms of a record without excluded samples left)
+    and read at the longer τ."""
+    n = len(_columns(y)[0])
+    strict = bridged if excluded is None else excluded | bridged
+    m = tau_factors(n) if m is None else _checked_factors(m, n)
+    whole = run_terms(_runs_of(strict, n), m) >= (n + 1 - 2 * m) / 2
+    k = len(m) if whole.all() else int(np.argmin(whole))
+    parts = [
+        allan_curves(y, tau0, factors, confidence, correction, mask, stable32_noise_id)
+        for factors, mask in ((m[:k], strict), (m[k:], excluded))
+        if len(factors)
+    ]
+    if len(parts) == 1:
+        return parts[0]
+    return [
+        AllanCurve(
+            *(np.concatenate([getattr(a, f), getattr(b, f)]) for f in _CURVE_ARRAYS),
+            a.confidence,
+        )
+        for a, b in zip(*parts, strict=True)
+    ]
+
+
+_CURVE_ARRAYS = ("tau_s", "adev", "adev_lo", "adev_hi", "edf", "n_terms", "alpha")
+"""The per-τ fields of :class:`AllanCurve`, in its order."""

@@ -210,3 +210,30 @@ def test_excluded_mask_shape_and_all_excluded_are_refused():
         oadev(y, 1.0, np.array([1]), excluded=np.zeros(99, dtype=bool))
     with pytest.raises(ValueError, match="every sample"):
         oadev(y, 1.0, np.array([1]), excluded=np.ones(100, dtype=bool))
+
+
+def test_bridged_samples_are_skipped_where_half_the_terms_remain_and_read_beyond() -> None:
+    """``bridged``: short runs of lost samples (here one in 200, 0.5 %) are skipped like the
+    ``excluded`` ones at the τ where that leaves at least half of the N + 1 − 2m terms, and read
+    (their fill) at the longer τ: each part equals the curve of its own mask, field by field."""
+    rng = np.random.default_rng(11)
+    n = 20_000
+    y = rng.normal(0, 1, n)
+    bridged = np.zeros(n, dtype=bool)
+    bridged[rng.choice(n, 100, replace=False)] = True
+    excluded = np.zeros(n, dtype=bool)
+    excluded[5_000:5_400] = True  # a long gap, skipped at every τ
+    m = tau_factors(n)
+    (c,) = allan_curves(y, 0.01, m, excluded=excluded, bridged=bridged)
+    (strict,) = allan_curves(y, 0.01, m, excluded=excluded | bridged)
+    (loose,) = allan_curves(y, 0.01, m, excluded=excluded)
+    k = int(np.argmax(strict.n_terms < (n + 1 - 2 * strict.tau_s / 0.01) / 2))
+    assert 0 < k < len(strict.tau_s)  # both parts present
+    np.testing.assert_array_equal(c.tau_s, loose.tau_s)  # every τ the long gap leaves
+    for field in ("adev", "adev_lo", "adev_hi", "edf", "n_terms", "alpha"):
+        got = getattr(c, field)
+        np.testing.assert_array_equal(got[:k], getattr(strict, field)[:k], err_msg=field)
+        np.testing.assert_array_equal(got[k:], getattr(loose, field)[k:], err_msg=field)
+    none = np.zeros(n, dtype=bool)
+    (same,) = allan_curves(y, 0.01, m, excluded=excluded, bridged=none)
+    np.testing.assert_array_equal(same.adev, loose.adev)  # nothing bridged: the plain call
