@@ -204,7 +204,11 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/report/test_figures_workers.py",
         "tests/report/test_loop_figure.py",
     ),
-    "pipeline/report/outputs.py": ("tests/test_api.py", "tests/report/test_report.py"),
+    "pipeline/report/outputs.py": (
+        "tests/report/test_outputs.py",
+        "tests/test_api.py",
+        "tests/report/test_report.py",
+    ),
 }
 
 
