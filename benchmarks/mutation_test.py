@@ -200,6 +200,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/recording/test_scenario.py",
     ),
     "pipeline/report/figures.py": (
+        "tests/report/test_allan_figure.py",
         "tests/report/test_figure_labels.py",
         "tests/report/test_figures_workers.py",
         "tests/report/test_loop_figure.py",

@@ -26,6 +26,7 @@ from imupipe.report import figures
         (0.046, "4.6×10⁻²"),
         (5.25e-2, "5.25×10⁻²"),
         (9.9996e-4, "10⁻³"),
+        (9.5e-3, "9.5×10⁻³"),  # below 10: its own decade
     ],
 )
 def test_power_of_ten_labels(value: float, label: str) -> None:
