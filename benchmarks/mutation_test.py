@@ -67,6 +67,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     ),
     "pipeline/analysis/condition.py": (
         "tests/analysis/test_condition.py",
+        "tests/analysis/test_host_stamps.py",
         "tests/test_hostile.py::test_a_rate_switch_is_cut_not_averaged_into_jitter",
         "tests/io/test_ros_bags.py",
     ),
