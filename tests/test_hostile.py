@@ -638,6 +638,7 @@ def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, cli) -> N
     assert report["input"]["frames"] == fast  # the switch found to the row, not the block
     assert any(
         w.startswith("the sample rate changes 1 time(s) (200 Hz from frame 0, 100 Hz from frame")
+        and w.endswith(f"frames 0..{fast - 1} (200 Hz)")
         for w in report["input"]["warnings"]
     )
     assert not any("jitter" in w for w in report["input"]["warnings"])

@@ -106,6 +106,20 @@ def test_lost_frames_are_found_and_placed_among_jittery_stamps(kind: str) -> Non
     assert s.tau0_s == pytest.approx(PERIOD_NS * 1e-9 * (1 + 30e-6), rel=1e-3)
 
 
+def test_a_window_or_a_short_record_of_jittery_stamps_keeps_its_rate() -> None:
+    """The rate read from the placed stamps of a window that starts 10 s in (stamps not from 0),
+    and of a record too short for three 240-row spans (the mean step then)."""
+    frame = received(20_000, lost=((12_000, 2),))
+    s = condition(imu_recording(stamped("latency", frame)), gaps="mask", start_s=10.0)
+    assert s.counts["missed_frames"] == 2
+    assert s.rate_hz == pytest.approx(200 / (1 + 30e-6), rel=1e-4)
+    assert s.nominal_rate_hz == pytest.approx(s.rate_hz, rel=1e-9)  # no rate but the stamps'
+    assert not any("differs from the nominal" in w for w in s.warnings)
+    short = condition(imu_recording(stamped("burst2", np.arange(500))))
+    assert any(w.startswith("stamps scatter by ") for w in short.warnings)
+    assert short.rate_hz == pytest.approx(200, rel=5e-3)  # a burst at either end: ~1 / n
+
+
 def test_frames_lost_often_under_a_drifting_clock_are_each_counted() -> None:
     """A host timer whose rate drifts by 4 % over the record, latency, and 0.2 % of the frames
     lost at random (403 of them, some next to each other): every lost frame counted."""
@@ -189,7 +203,13 @@ def test_a_bag_losing_one_percent_of_its_frames_keeps_its_long_taus(tmp_path: Pa
     n_gyro, n_accel = write_imu_bag(tmp_path / "lossy.mcap", frame * PERIOD_NS)
     result = imupipe.analyze(tmp_path / "lossy.mcap", tmp_path / "out", rrd=False, figures=False)
     said = [w for w in result.input.warnings if "are read by the Allan variance as their fill" in w]
-    assert len(said) == 1 and said[0].startswith(f"{113_000 - len(frame)} masked samples in ")
+    lost = 113_000 - len(frame)
+    assert len(said) == 1 and said[0].startswith(f"{lost} masked samples in ")
+    assert f"({100 * lost / 113_000:.3g} % of the grid)" in said[0]
+    assert said[0].endswith(
+        f"now {113_000} ({113_000 * PERIOD_NS * 1e-9:.4g} s); the fill carries no noise, so "
+        f"there a white noise' Allan variance reads low by about {100 * lost / 113_000:.2g} %"
+    )
     assert not any("the Allan variance stops at" in w for w in result.input.warnings)
     seconds = 113_000 * PERIOD_NS * 1e-9
     covered = 0

@@ -237,3 +237,20 @@ def test_bridged_samples_are_skipped_where_half_the_terms_remain_and_read_beyond
     none = np.zeros(n, dtype=bool)
     (same,) = allan_curves(y, 0.01, m, excluded=excluded, bridged=none)
     np.testing.assert_array_equal(same.adev, loose.adev)  # nothing bridged: the plain call
+
+
+def test_bridged_samples_switch_at_half_the_terms_to_the_factor() -> None:
+    """With every factor m from 1 to 300, the first one read across the bridged samples is the
+    first whose skipping would keep fewer than half of the N + 1 − 2m terms."""
+    rng = np.random.default_rng(12)
+    n = 6_000
+    y = rng.normal(0, 1, n)
+    bridged = np.zeros(n, dtype=bool)
+    bridged[rng.choice(n, 30, replace=False)] = True
+    m = np.arange(1, 301)
+    (c,) = allan_curves(y, 1.0, m, bridged=bridged)
+    kept = allan.run_terms(allan.clean_runs(bridged), m)
+    first = int(np.argmax(kept < (n + 1 - 2 * m) / 2))
+    assert 0 < first < 299
+    np.testing.assert_array_equal(c.n_terms[:first], kept[:first])
+    np.testing.assert_array_equal(c.n_terms[first:], n + 1 - 2 * m[first:])
