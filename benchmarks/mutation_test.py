@@ -206,6 +206,20 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/report/test_figures_workers.py",
         "tests/report/test_loop_figure.py",
     ),
+    "pipeline/device/frame_schema.py": (
+        "tests/io/test_decode_contract.py",
+        "tests/io/test_mcap_io.py",
+        "tests/io/test_busy_bags.py",
+    ),
+    "pipeline/io/columns.py": (
+        "tests/io/test_column_sources.py",
+        "tests/io/test_decode_memory.py",
+        "tests/analysis/test_lowmem.py",
+    ),
+    "pipeline/recording/scenario.py": (
+        "tests/recording/test_scenario.py",
+        "tests/recording/test_simulator.py",
+    ),
     "pipeline/report/outputs.py": (
         "tests/report/test_outputs.py",
         "tests/test_api.py",
