@@ -569,3 +569,22 @@ def test_a_ros1_bag_is_named_and_its_conversion_reads_bit_for_bit(tmp_path: Path
     for k, axis in enumerate(("gyro_x", "gyro_y", "gyro_z")):
         np.testing.assert_array_equal(frames[axis].to_numpy(), gyro[:, k])
         np.testing.assert_array_equal(frames[f"accel_{axis[-1]}"].to_numpy(), accel[:, k])
+
+
+def test_an_imu_without_gyros_and_gravity_removed_is_named_so(tmp_path: Path, capsys) -> None:
+    """An orientation filter's Imu: angular velocity 0 in every message (not measured; REP 145
+    marks it with covariance -1) and gravity already removed from the accelerations. The gyros
+    are named as not measured rather than stuck, and the accelerometers as gravity-removed
+    rather than in a wrong unit; the accelerometers are analysed."""
+    stamps, gyro, accel = imu_stream()
+    path = write_imu_topics(
+        tmp_path / "f.mcap", {"/imu": (stamps, 0.0 * gyro, accel - accel.mean(0))}
+    )
+    code, report, _ = analyze(path, capsys)
+    w = warnings_of(report)
+    assert code == 0
+    for axis in ("gyro_x", "gyro_y", "gyro_z"):
+        assert f"{axis} is 0 in every sample over the segment (not measured by this sensor?)" in w
+    assert "stuck channel" not in w
+    assert "about 0, as if the driver removed gravity" in w
+    assert set(report["axes"]) == {"accel_x", "accel_y", "accel_z"}

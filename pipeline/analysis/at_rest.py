@@ -8,7 +8,8 @@ nothing in the numbers to say so.  At rest, the accelerometers measure the speci
 gravity, whatever the orientation: the magnitude of the mean acceleration vector is local
 gravity, 9.78-9.83 m/s² on the Earth's surface, give or take the bias and scale error of the
 sensor (the two real ADIS16405 units of ../shared/reference: 9.965 and 9.982 m/s²).  A
-magnitude far from that says the units are not m/s², or the sensor was not at rest.
+magnitude far from that says the units are not m/s², or the sensor was not at rest; one
+near 0, that the driver removed gravity (a "linear acceleration" output).
 """
 
 from __future__ import annotations
@@ -24,6 +25,9 @@ ACCEL_AXES = ("accel_x", "accel_y", "accel_z")
 GRAVITY_TOLERANCE = 0.1
 """Relative departure of the mean specific force from standard gravity that is warned about:
 local gravity spans ±0.3 %, a MEMS accelerometer's bias and scale error a few per cent."""
+GRAVITY_REMOVED = 0.5
+"""Mean specific force (m/s²) below which the accelerations read as gravity removed by the
+driver: a MEMS bias is tens of mg at most, and g published as m/s² reads 0.9-1.1."""
 
 
 def specific_force_warning(axes: Mapping[str, AxisResult]) -> str | None:
@@ -41,6 +45,12 @@ def specific_force_warning(axes: Mapping[str, AxisResult]) -> str | None:
         return (
             f"{said}: the accelerations look like g, not the m/s² that sensor_msgs/Imu and "
             "REP 103 require; every accelerometer term is then 9.81 times too small"
+        )
+    if magnitude < GRAVITY_REMOVED:
+        return (
+            f"{said}: about 0, as if the driver removed gravity (from its orientation "
+            "estimate, whose errors then add to the accelerometers' noise: analyse the raw "
+            "accelerations if the driver publishes them), or a sensor in free fall"
         )
     return (
         f"{said}: accelerations in another unit than m/s² (REP 103), or a sensor that was not "

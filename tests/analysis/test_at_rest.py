@@ -29,7 +29,9 @@ def test_gravity_in_any_orientation_is_no_warning(mean: tuple[float, float, floa
         ((0.03, -0.02, -0.98), "look like g"),
         ((0.0, 0.0, 10.8), "or a sensor that was not at rest"),  # 10.1 % over
         ((0.0, 0.0, 8.82), "or a sensor that was not at rest"),  # 10.1 % under
-        ((0.0, 0.0, 0.0), "or a sensor that was not at rest"),  # no gravity at all
+        ((0.3, 0.0, -0.39), "as if the driver removed gravity"),  # |a| 0.492 m/s²
+        ((0.0, 0.0, 0.0), "as if the driver removed gravity"),  # no gravity at all
+        ((0.0, 0.0, 0.5), "or a sensor that was not at rest"),  # 0.5 m/s²: neither
     ],
 )
 def test_far_from_gravity_is_warned(mean: tuple[float, float, float], says: str) -> None:
