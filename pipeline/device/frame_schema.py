@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import importlib.resources
 from importlib.resources.abc import Traversable
-from pathlib import Path
 
 import numpy as np
 
@@ -47,12 +46,9 @@ TAIL_SIZE = 4 + 12 * 2 + 1
 
 
 def schema_file(name: str) -> Traversable:
-    """A file of ``schemas/``: installed as the package ``imupipe.schemas``; in a source checkout
-    (``python -m imupipe`` run from the repository root) the folder beside the package."""
-    try:
-        return importlib.resources.files("imupipe.schemas").joinpath(name)
-    except ModuleNotFoundError:
-        return Path(__file__).resolve().parents[1] / "schemas" / name
+    """A file of the repository's ``schemas/``, installed (editable or not) as the package
+    ``imupipe.schemas`` (``imupipe`` itself is only importable once installed)."""
+    return importlib.resources.files("imupipe.schemas").joinpath(name)
 
 
 def message_definition() -> str:
