@@ -251,9 +251,10 @@ def _count(y: np.ndarray, differs: Callable[[int], np.ndarray]) -> int:
 
 def unanalysable(y: np.ndarray) -> str | None:
     """Why an axis holds no noise the Allan variance can analyse (None when it can): 0 throughout
-    (a field the sensor does not measure), constant (stuck), beyond :data:`FLOAT_RANGE` (values ×1e200, denormals), constant but for a few
-    glitches (:data:`GLITCH_FRACTION`), or a pattern repeating every 2 samples (a 1-LSB channel
-    alternating 0/1: its Allan variance is exactly 0 at every even m)."""
+    (a field the sensor does not measure), constant (stuck), beyond :data:`FLOAT_RANGE` (values
+    ×1e200, denormals), constant but for a few glitches (:data:`GLITCH_FRACTION`), or a pattern
+    repeating every 2 samples (a 1-LSB channel alternating 0/1: its Allan variance is exactly 0
+    at every even m)."""
     lo, hi = float(y.min()), float(y.max())
     if lo == hi == 0.0:  # sensor_msgs/Imu: REP 145 marks a field not measured by covariance -1
         return "is 0 in every sample over the segment (not measured by this sensor?)"
