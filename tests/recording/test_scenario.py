@@ -103,3 +103,39 @@ def test_truth_dict_units():
     assert step["unit"] == "mg" and step["size_si"] == pytest.approx(2e-3 * 9.80665)
     coeff = truth["temperature"]["coefficients_si_per_kelvin"]["gyro_z"]
     assert coeff == pytest.approx(0.02 * math.pi / 180)
+
+
+def test_effect_shapes_are_the_documented_ones():
+    """The supply's ripple, a warm-up and a drift, value by value (unit, V, s)."""
+    s = scenario_from_dict(
+        {
+            "supply": {"nominal_v": 5.0, "ripple_amplitude_v": 0.2, "ripple_frequency_hz": 0.5},
+            "drift": [
+                {"axis": "gyro_x", "warmup_amplitude": 2.0, "warmup_tau_s": 600.0,
+                 "slope_per_hour": 0.5},
+                {"axis": "gyro_y", "warmup_amplitude": 1.0, "warmup_tau_s": 10.0},
+            ],
+        }
+    )  # fmt: skip
+    t = np.array([0.0, 0.5, 1.5, 3600.0])
+    np.testing.assert_allclose(s.supply.at(t), [5.0, 5.2, 4.8, 5.0], atol=1e-12)
+    full, warmup_only = s.drift
+    np.testing.assert_allclose(full.at(t), 2.0 * np.exp(-t / 600.0) + 0.5 * t / 3600.0, rtol=1e-15)
+    assert full.at(np.array([3600.0]))[0] == pytest.approx(2.0 * math.exp(-6.0) + 0.5)
+    np.testing.assert_allclose(warmup_only.at(t), np.exp(-t / 10.0), rtol=1e-15)  # no slope
+
+
+def test_valid_corner_values_are_accepted():
+    """Host jitter, a fast temperature cycle and spikes of the default 20 ms parse."""
+    s = scenario_from_dict(
+        {
+            "host": {"jitter_s": 0.002},
+            "temperature": {"amplitude_c": 1.0, "period_s": 0.5},
+            "spikes": [{"axis": "accel_z", "rate_per_hour": 2.0, "amplitude": 5.0}],
+        }
+    )
+    assert s.jitter_s == 0.002
+    assert s.temperature.at(np.array([0.125]))[0] == pytest.approx(21.0 + 1.0)
+    assert s.spikes[0].duration_s == 0.02
+    with pytest.raises(AttributeError):
+        s.spikes[0].duration_s = 1.0  # frozen: a scenario read is not changed behind its truth
