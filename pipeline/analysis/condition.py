@@ -463,12 +463,12 @@ def _grid_places(
 
 
 def _scatter(t: np.ndarray) -> tuple[float, float]:
-    """(the median stamp step over spans of :data:`SPAN_ROWS` rows (s; the mean step with
-    fewer than three spans), the robust sigma of
-    the single steps about it over it): the sample period of stamps that jitter or come in
-    bursts (one span a gap touches does not move the median), and how much they scatter (a
-    host's receive times: tens of %; bursts of samples stamped together: their steps ~0 and a
-    few periods, over 100 %)."""
+    """(the median stamp step over spans of :data:`SPAN_ROWS` rows, s (the mean step with fewer
+    than three spans); the robust sigma of every :data:`SCATTER_STRIDE`-th single step about it,
+    1.4826 × the median absolute deviation, over it): the sample period of stamps that jitter
+    or come in bursts (one span a gap touches does not move the median), and how much they
+    scatter (a host's receive times: tens of %; samples stamped together in bursts: steps of ~0
+    and a few periods, over 100 %)."""
     spans = np.diff(t[::SPAN_ROWS]) / SPAN_ROWS
     period = float(np.median(spans)) if spans.size >= 3 else (t[-1] - t[0]) / (len(t) - 1)
     if not period > 0:
@@ -658,11 +658,10 @@ def condition(
             f"{named_frames(rec)}) among its first {FRAME_ID_SAMPLE}: if several IMUs publish on "
             "it, they are analysed as one stream (give each its own topic)"
         )
-    counter = df["counter"].to_numpy() if df["counter"].null_count() == 0 else None
     # stamps that scatter (a host's receive times, bursts) and no frame counter to place them;
     # not messages of several frames (several IMUs on the topic stamp in pairs or sets too)
     jittery = (
-        counter is None
+        df["counter"].null_count() > 0
         and len(rec.frame_ids) <= 1
         and n > 2 * ENVELOPE_ROWS
         and _scatter(df["t_s"].to_numpy())[1] > JITTER_WARN
