@@ -212,6 +212,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/io/test_busy_bags.py",
     ),
     "pipeline/io/columns.py": (
+        "tests/io/test_column_notes.py",
         "tests/io/test_column_sources.py",
         "tests/io/test_decode_memory.py",
         "tests/analysis/test_lowmem.py",
