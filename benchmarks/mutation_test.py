@@ -221,6 +221,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/recording/test_scenario.py",
         "tests/recording/test_simulator.py",
     ),
+    "pipeline/jit.py": ("tests/test_jit.py", "tests/stats/test_allan_blocks.py"),
     "pipeline/report/outputs.py": (
         "tests/report/test_outputs.py",
         "tests/test_api.py",
