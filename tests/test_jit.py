@@ -205,6 +205,37 @@ def test_a_long_series_is_read_in_parts_of_at_least_part_min_values(
     assert jit.parts(jit.PART_MIN * 2) == 2
     assert jit.parts(jit.PART_MIN * 100) == 4
     assert jit.parts(0) == 1
+    assert jit.PART_MIN == 1 << 20  # a million values a thread (a thread's start costs more)
+    assert jit.parts(3 << 20) == 3
+
+
+def test_spread_of_no_jobs_calls_the_kernel_once_on_the_caller() -> None:
+    calls: list[tuple[int, int]] = []
+    jit.spread(lambda start, step: calls.append((start, step)), 0)
+    assert calls == [(0, 1)]  # its range of jobs is empty; no thread is started
+
+
+def test_without_an_affinity_mask_the_cpu_count_or_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Not Linux: os.cpu_count(), which may not know (None): then one core."""
+    monkeypatch.delattr(os, "sched_getaffinity")
+    monkeypatch.setattr(os, "cpu_count", lambda: None)
+    assert jit.usable_cores() == 1
+    monkeypatch.setattr(os, "cpu_count", lambda: 6)
+    assert jit.usable_cores() == 6
+
+
+def test_kernels_of_modules_outside_the_package_are_not_the_packages(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A module named after ``imupipe`` in sort order (``zz_other``) with a kernel of its own is
+    not scanned: only ``imupipe`` and its submodules are."""
+    import types
+
+    other = types.ModuleType("zz_other")
+    other.kernel = numba.njit(lambda x: x + 1)
+    other.kernel.__module__ = "zz_other"
+    monkeypatch.setitem(sys.modules, "zz_other", other)
+    assert all(k.__module__.startswith("imupipe") for k in jit.imported_kernels())
 
 
 @pytest.mark.parametrize(("size", "n_parts"), [(10, 3), (7, 7), (1_000_003, 4)])
