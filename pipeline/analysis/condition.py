@@ -860,6 +860,8 @@ def _masked_series(
     bridged = None
     if 8 * clean < len(excluded):  # no term of τ ≥ T/8 (the long-τ fit's) is free of them
         bridged, clean = _bridge(excluded, clean, tau0, warnings)
+    if bridged is not None:
+        warnings[0] += " (the short runs only where that leaves half the terms: below)"
     if 8 * clean < len(excluded):
         warnings.append(
             f"the longest run of samples with none masked is {clean} ({clean * tau0:.4g} s of "

@@ -211,6 +211,11 @@ def test_a_bag_losing_one_percent_of_its_frames_keeps_its_long_taus(tmp_path: Pa
         f"there a white noise' Allan variance reads low by about {100 * lost / 113_000:.2g} %"
     )
     assert not any("the Allan variance stops at" in w for w in result.input.warnings)
+    (masked,) = [w for w in result.input.warnings if w.startswith("analysing the whole")]
+    assert masked.endswith(
+        "Allan variance terms touching them are skipped (the short runs only where that "
+        "leaves half the terms: below)"
+    )
     seconds = 113_000 * PERIOD_NS * 1e-9
     covered = 0
     for name, axis in result.axes.items():
