@@ -38,7 +38,7 @@ import numpy as np
 from imupipe.errors import ImupipeError
 from imupipe.io.decode import FRAME_ID_SAMPLE, ImuRecording, nonfinite_bits
 from imupipe.stats import robust
-from imupipe.stats.allan import clean_runs
+from imupipe.stats.allan import clean_runs, run_offsets
 from imupipe.vocab import AXES
 
 GAP_FACTOR = 1.5
@@ -230,7 +230,7 @@ def fill_runs(y: np.ndarray, holes: np.ndarray, span: int) -> None:
     right = np.concatenate([s[1] for s in sides])
     length = stops - starts
     run = np.repeat(np.arange(len(starts)), length)
-    step = np.arange(int(length.sum())) - np.repeat(np.cumsum(length) - length, length) + 1
+    step = run_offsets(length) + 1
     y[holes] = left[run] + (right - left)[run] * (step / (length + 1)[run])
 
 
@@ -581,7 +581,8 @@ def _bridge(
     if count > BRIDGE_MAX_FRACTION * len(excluded) or not len(short):
         return None, clean
     bridged = np.zeros(len(excluded), dtype=bool)
-    bridged[np.repeat(short[:, 0], short[:, 1] - short[:, 0]) + _offsets(short)] = True
+    lengths = short[:, 1] - short[:, 0]
+    bridged[np.repeat(short[:, 0], lengths) + run_offsets(lengths)] = True
     longest = _longest_run(~(excluded & ~bridged))
     if longest <= clean:
         return None, clean
@@ -594,12 +595,6 @@ def _bridge(
         f"noise' Allan variance reads low by about {100 * count / len(excluded):.2g} %"
     )
     return bridged, longest
-
-
-def _offsets(runs: np.ndarray) -> np.ndarray:
-    """0, 1, …, length − 1 for each [start, stop) run of ``runs``, concatenated."""
-    length = runs[:, 1] - runs[:, 0]
-    return np.arange(int(length.sum())) - np.repeat(np.cumsum(length) - length, length)
 
 
 def _mask_warning(series_samples: int, excluded: int, n: int) -> str:
@@ -660,12 +655,9 @@ def condition(
         )
     # stamps that scatter (a host's receive times, bursts) and no frame counter to place them;
     # not messages of several frames (several IMUs on the topic stamp in pairs or sets too)
-    jittery = (
-        df["counter"].null_count() > 0
-        and len(rec.frame_ids) <= 1
-        and n > 2 * ENVELOPE_ROWS
-        and _scatter(df["t_s"].to_numpy())[1] > JITTER_WARN
-    )
+    maybe = df["counter"].null_count() > 0 and len(rec.frame_ids) <= 1 and n > 2 * ENVELOPE_ROWS
+    span_period, scatter = _scatter(df["t_s"].to_numpy()) if maybe else (np.nan, 0.0)
+    jittery = scatter > JITTER_WARN
     regimes = rate_regimes(df["t_s"].to_numpy(), spans=jittery)
     if len(regimes) > 1:  # analyse the longest part at one rate, as if the rest were a gap
         first, stop, step = max(regimes, key=lambda r: r[1] - r[0])
@@ -681,7 +673,7 @@ def condition(
     t = df["t_s"].to_numpy()
     counter = df["counter"].to_numpy() if df["counter"].null_count() == 0 else None
     mad_sigma = robust.MAD_TO_SIGMA * robust.mad(t, differences=True)
-    if jittery:  # the part at one rate, again
+    if jittery and len(regimes) > 1:  # the part at one rate, again
         span_period, scatter = _scatter(t)
         jittery = n > 2 * ENVELOPE_ROWS and scatter > JITTER_WARN
     if jittery and "output_rate_hz" not in rec.device:

@@ -23,7 +23,7 @@ Without an excluded sample the computation is the gap-free one, unchanged.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numba
 import numpy as np
@@ -106,6 +106,13 @@ def clean_runs(excluded: np.ndarray) -> np.ndarray:
     """(k, 2) int64 ``[start, stop)``: the maximal runs of samples not ``excluded`` (bool (n,))."""
     padded = np.concatenate(([True], np.asarray(excluded, dtype=bool), [True]))
     return np.flatnonzero(padded[1:] != padded[:-1]).astype(np.int64).reshape(-1, 2)
+
+
+def run_offsets(lengths: np.ndarray) -> np.ndarray:
+    """0, 1, …, L − 1 for each length L of ``lengths`` (int), concatenated: each sample's place
+    within its run."""
+    lengths = np.asarray(lengths, dtype=np.int64)
+    return np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
 
 
 def run_terms(runs: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -380,8 +387,11 @@ class AllanCurve:
         """This curve at τ ≤ ``tau_max_s`` (s) only (every point's value, edf and noise type
         depend on its own τ alone, so the prefix equals the curve computed on that range)."""
         keep = self.tau_s <= tau_max_s * (1 + 1e-9)
-        fields = (self.tau_s, self.adev, self.adev_lo, self.adev_hi, self.edf, self.n_terms)
-        return AllanCurve(*(f[keep] for f in fields), self.alpha[keep], self.confidence)
+        return AllanCurve(*(getattr(self, f)[keep] for f in _CURVE_ARRAYS), self.confidence)
+
+
+_CURVE_ARRAYS = tuple(f.name for f in fields(AllanCurve) if f.name != "confidence")
+"""The per-τ fields of :class:`AllanCurve`, in its order."""
 
 
 def edf_runs(alpha: int, m: int, runs: np.ndarray) -> float:
@@ -481,7 +491,3 @@ def _bridged_curves(
         )
         for a, b in zip(*parts, strict=True)
     ]
-
-
-_CURVE_ARRAYS = ("tau_s", "adev", "adev_lo", "adev_hi", "edf", "n_terms", "alpha")
-"""The per-τ fields of :class:`AllanCurve`, in its order."""

@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from imupipe.stats.allan import run_offsets
+
 STENCIL = np.array([1.0, -2.0, 1.0])
 """Second-difference weights s of d_m(t) at phase offsets 0, m, 2m."""
 
@@ -104,7 +106,7 @@ def _lag_rules(
     short = q - p <= _EXACT_PIECE  # summed lag by lag, each piece [p, q) without its end
     length = (q - p)[short].astype(np.int64)
     starts = np.repeat(p[short], length)
-    within = np.arange(length.sum()) - np.repeat(np.cumsum(length) - length, length)
+    within = run_offsets(length)
     a, b, long_pair = p[~short], q[~short], pair[~short]
     mid, half = (a + b) / 2, (b - a) / 2
     pairs = [np.arange(len(m)), np.repeat(pair[short], length)]
