@@ -227,6 +227,19 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_api.py",
         "tests/report/test_report.py",
     ),
+    "pipeline/recording/simulator.py": (
+        "tests/recording/test_simulator.py",
+        "tests/recording/test_scenario.py",
+        "tests/recording/test_recorder_signals.py",
+    ),
+    "pipeline/analysis/analyze.py": (
+        "tests/test_api.py",
+        "tests/analysis/test_final_model.py",
+        "tests/test_cli.py",
+        "tests/analysis/test_workers.py",
+        "tests/test_odd_inputs.py",
+    ),
+    "pipeline/cli.py": ("tests/test_cli.py", "tests/test_odd_inputs.py", "tests/test_hostile.py"),
 }
 
 
