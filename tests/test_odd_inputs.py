@@ -72,13 +72,15 @@ def imu_stream(n: int = N, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.nd
     return stamps, rng.normal(0, 1e-3, (n, 3)), rng.normal(0, 3e-3, (n, 3)) + np.array([0, 0, 9.81])
 
 
-def write_imu_topics(path: Path, streams: dict[str, tuple[np.ndarray, ...]]) -> Path:
+def write_imu_topics(
+    path: Path, streams: dict[str, tuple[np.ndarray, ...]], no_estimate=(False, False)
+) -> Path:
     with open(path, "wb") as f:
         w = BulkWriter(f, profile="ros2")
         sid = w.register_schema(IMU_SCHEMA, "ros2msg", b"")
         for topic, (stamps, gyro, accel) in streams.items():
             cid = w.register_channel(topic, "cdr", sid)
-            w.write_chunk(cid, stamps, imu_payloads(stamps, gyro, accel))
+            w.write_chunk(cid, stamps, imu_payloads(stamps, gyro, accel, no_estimate=no_estimate))
         w.finish()
     return path
 
@@ -572,10 +574,11 @@ def test_a_ros1_bag_is_named_and_its_conversion_reads_bit_for_bit(tmp_path: Path
 
 
 def test_an_imu_without_gyros_and_gravity_removed_is_named_so(tmp_path: Path, capsys) -> None:
-    """An orientation filter's Imu: angular velocity 0 in every message (not measured; REP 145
-    marks it with covariance -1) and gravity already removed from the accelerations. The gyros
-    are named as not measured rather than stuck, and the accelerometers as gravity-removed
-    rather than in a wrong unit; the accelerometers are analysed."""
+    """An orientation filter's Imu: angular velocity 0 in every message (not measured, and not
+    marked so with the covariance -1 the message definition asks for: next test) and gravity
+    already removed from the accelerations. The gyros are named as not measured rather than
+    stuck, and the accelerometers as gravity-removed rather than in a wrong unit; the
+    accelerometers are analysed."""
     stamps, gyro, accel = imu_stream()
     path = write_imu_topics(
         tmp_path / "f.mcap", {"/imu": (stamps, 0.0 * gyro, accel - accel.mean(0))}
@@ -587,4 +590,22 @@ def test_an_imu_without_gyros_and_gravity_removed_is_named_so(tmp_path: Path, ca
         assert f"{axis} is 0 in every sample over the segment (not measured by this sensor?)" in w
     assert "stuck channel" not in w
     assert "about 0, as if the driver removed gravity" in w
+    assert set(report["axes"]) == {"accel_x", "accel_y", "accel_z"}
+
+
+def test_gyros_marked_no_estimate_are_left_out_as_the_message_says(tmp_path: Path, capsys) -> None:
+    """The same gyro-less driver following sensor_msgs/msg/Imu.msg: its angular velocity's
+    covariance starts with -1 ("no estimate"). The gyros are left out as not provided, with the
+    mark named, instead of being read as zeros; the accelerometers are analysed."""
+    stamps, gyro, accel = imu_stream()
+    path = write_imu_topics(
+        tmp_path / "f.mcap", {"/imu": (stamps, 0.0 * gyro, accel)}, no_estimate=(True, False)
+    )
+    code, report, _ = analyze(path, capsys)
+    w = warnings_of(report)
+    assert code == 0
+    assert "angular_velocity_covariance[0] is -1 in every message" in w
+    for axis in ("gyro_x", "gyro_y", "gyro_z"):
+        assert f"{axis} is NaN/inf in every frame (an axis the sensor does not provide?)" in w
+    assert "is 0 in every sample" not in w
     assert set(report["axes"]) == {"accel_x", "accel_y", "accel_z"}

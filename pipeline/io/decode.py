@@ -66,13 +66,15 @@ _IMU_GYRO = 8 * (4 + 9)  # offset of angular_velocity within the tail
 _IMU_ACCEL = 8 * (4 + 9 + 3 + 9)
 LAYOUTS = {
     "adis16364": CdrLayout(4, TAIL_SIZE, ((0, TAIL_SIZE),)),
-    "imu": CdrLayout(8, _IMU_TAIL, ((_IMU_GYRO, 24), (_IMU_ACCEL, 24))),  # gyro @0, accel @24
+    # each vector and its covariance's element 0: gyro @0, @24; accel @32, @56 (one copy each)
+    "imu": CdrLayout(8, _IMU_TAIL, ((_IMU_GYRO, 32), (_IMU_ACCEL, 32))),
     "temperature": CdrLayout(8, 16, ((0, 8),)),
 }
 """By kind of channel, what the scan copies of each message (:mod:`imupipe.io.mcap_walk`):
 the header, then for our frames every field after it (``Adis16364Frame.msg``, aligned to 4),
-for ``Imu`` angular_velocity and linear_acceleration (3 float64 each, fields aligned to 8), for
-``Temperature`` the temperature (float64; the variance follows)."""
+for ``Imu`` angular_velocity and linear_acceleration (3 float64 each, fields aligned to 8), each
+with element 0 of its covariance (:data:`NO_ESTIMATE`), for ``Temperature`` the temperature
+(float64; the variance follows)."""
 
 
 DECODED_SCHEMA = pl.Schema(
@@ -120,6 +122,21 @@ class ImuRecording:
     frame_ids: tuple[str, ...] = ()
     """The distinct ``header.frame_id`` values among the first :data:`FRAME_ID_SAMPLE`
     messages of an Imu topic (more than one: messages of several sensors on one topic?)."""
+
+
+NO_ESTIMATE = -1.0
+"""Element 0 of an Imu message's covariance that marks its vector as no estimate: "If you have
+no estimate for one of the data elements (e.g. your IMU doesn't produce an orientation
+estimate), please set element 0 of the associated covariance matrix to -1. If you are
+interpreting this message, please check for a value of -1 in the first element of each
+covariance matrix, and disregard the associated estimate." (``sensor_msgs/msg/Imu.msg``,
+common_interfaces).  Such a message's angular velocity or linear acceleration is read as NaN, a
+missing value (:func:`_no_estimate_warnings`)."""
+NO_ESTIMATE_FIELDS = {
+    "angular_velocity": ("angular_velocity_covariance", AXES[:3]),
+    "linear_acceleration": ("linear_acceleration_covariance", AXES[3:]),
+}
+"""The Imu vectors whose no-estimate mark is read: (its covariance field, the axes it holds)."""
 
 
 FRAME_ID_SAMPLE = 64
@@ -270,6 +287,8 @@ class _Columns:
         self.skip = skip
         self.spill = spill
         self.rows = 0
+        self.no_estimate: defaultdict[str, int] = defaultdict(int)
+        """Messages whose vector (a key of :data:`NO_ESTIMATE_FIELDS`) is marked no estimate."""
 
     def add(self, **cols: np.ndarray) -> None:
         for k, v in cols.items():
@@ -340,17 +359,26 @@ def _decode_imu(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) 
 
     A subset keeps the stamps only for ``t_s`` / ``stamp_ns`` / ``temp_c`` (interpolated on the
     stamps), each axis only when named, and ``nonfinite`` (which axes are NaN/inf,
-    :func:`nonfinite_bits`: 1 byte per frame) instead of the axes for conditioning."""
+    :func:`nonfinite_bits`: 1 byte per frame) instead of the axes for conditioning.  A vector
+    whose covariance's element 0 is :data:`NO_ESTIMATE` is read as NaN (counted in
+    ``out.no_estimate``)."""
     every = columns is None
+    vectors = m.f64(0, 8).reshape(len(m), 2, 4)  # per vector: x, y, z, covariance[0]
+    for k, vector in enumerate(NO_ESTIMATE_FIELDS):
+        marked = vectors[:, k, 3] == NO_ESTIMATE
+        if marked.any():
+            vectors[marked, k, :3] = np.nan  # the rows are this decode's own copy
+            out.no_estimate[vector] += int(marked.sum())
+    axes = [vectors[:, i // 3, i % 3] for i in range(len(AXES))]  # views into the rows
     if every or columns & {"t_s", "stamp_ns", "temp_c"}:
         out.add(stamp_ns=m.stamps())
     if every or "t_s" in columns:
         out.add(log_time_ns=m.log_time)
     if not every and "nonfinite" in columns:
-        out.add(nonfinite=nonfinite_bits(m.f64(0, 6).T, len(m)))
+        out.add(nonfinite=nonfinite_bits(axes, len(m)))
     for i, name in enumerate(AXES):  # each axis a contiguous column, as the frame holds it
         if every or name in columns:
-            out.add(**{name: m.f64(8 * i, 1)[:, 0]})
+            out.add(**{name: axes[i]})
 
 
 def _decode_temperature(m: _CdrMessages, out: _Columns) -> None:
@@ -440,6 +468,21 @@ def _imu_frame(
     }
     wanted = [k for k in makers if (k != "nonfinite" if columns is None else k in columns)]
     return pl.DataFrame({k: makers[k]() for k in wanted})
+
+
+def _no_estimate_warnings(counts: dict[str, int], rows: int) -> list[str]:
+    """One warning per Imu vector marked no estimate (:data:`NO_ESTIMATE`) in ``counts`` of
+    ``rows`` messages."""
+    out = []
+    for vector, marked in counts.items():
+        covariance, axes = NO_ESTIMATE_FIELDS[vector]
+        where = "every message" if marked == rows else f"{marked} of {rows} messages"
+        out.append(
+            f"{covariance}[0] is -1 in {where}: the driver marks its {vector} as no estimate "
+            f"(sensor_msgs/msg/Imu: 'disregard the associated estimate'); {', '.join(axes)} "
+            "read as missing there"
+        )
+    return out
 
 
 def _namespace(topic: str) -> str:
@@ -575,7 +618,7 @@ class ScannedRecording:
         """The frame of the decode contract, or of ``columns`` only (``nonfinite``:
         :func:`nonfinite_bits`, if named); None if ``t_s`` needs the log time that the scan
         only counted (``keep_one_time_base``): the file must then be read again, keeping it."""
-        warnings = list(self.warnings)
+        warnings = list(self.warnings) + _no_estimate_warnings(self.channel.no_estimate, self.rows)
         use_log = (columns is None or "t_s" in columns) and _uses_log_time(
             self.channel.steps, warnings
         )

@@ -34,10 +34,13 @@ def imu_payloads(
     accel: np.ndarray,
     covariance: float = 0.01,
     frame_id: str = "imu",
+    no_estimate: tuple[np.ndarray | bool, np.ndarray | bool] = (False, False),
 ) -> np.ndarray:
     """Imu messages (n, size) bytes: identity orientation, covariances all ``covariance``,
     ``gyro`` (n, 3) rad/s and ``accel`` (n, 3) m/s² among the 37 float64 after the header
-    (size 316 for the frame_id ``"imu"``)."""
+    (size 316 for the frame_id ``"imu"``).  ``no_estimate``: per message (or for all), whether
+    its angular velocity, its linear acceleration is marked as no estimate (element 0 of its
+    covariance -1, as ``sensor_msgs/msg/Imu.msg`` asks)."""
     n, fid = len(stamp_ns), frame_id.encode()
     start = _field_start(fid)
     out = _headers(stamp_ns, start + 37 * 8, fid)
@@ -45,6 +48,8 @@ def imu_payloads(
     f64[:, 0:4] = [0.0, 0.0, 0.0, 1.0]
     f64[:, 13:16] = gyro
     f64[:, 25:28] = accel
+    f64[:, 16] = np.where(no_estimate[0], -1.0, covariance)
+    f64[:, 28] = np.where(no_estimate[1], -1.0, covariance)
     out[:, start:] = f64.astype("<f8").view(np.uint8).reshape(n, 37 * 8)
     return out
 

@@ -143,3 +143,44 @@ def test_gaps_in_a_rosbags_bag_are_masked_not_cut(tmp_path: Path, analysed_with_
     bag = tmp_path / "gapped"
     write_bag(bag, n, temperature=False, dropped=lost)
     analysed_with_two_gaps(bag, tmp_path / "out", n)
+
+
+@pytest.mark.parametrize("storage", [StoragePlugin.MCAP, StoragePlugin.SQLITE3])
+def test_a_vector_marked_no_estimate_is_read_as_missing(tmp_path: Path, storage) -> None:
+    """sensor_msgs/msg/Imu.msg: element 0 of a covariance at -1 means "no estimate, disregard
+    it". A driver without gyros marks every angular velocity so (its values are 0); one whose
+    accelerometer reading failed marks a few linear accelerations. Those values are NaN (the
+    conditioning's missing rows: an absent axis, masked frames), every other value is as
+    written, and the decode says how many messages were marked."""
+    n = 500
+    rng = np.random.default_rng(5)
+    accel = rng.normal(0, 0.03, (n, 3)) + np.array([0.0, 0.0, 9.81])
+    failed = {7, 8, 250, 499}
+    bag = tmp_path / "bag"
+    with Writer(bag, version=9, storage_plugin=storage) as writer:
+        conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=TS)
+        for i in range(n):
+            s = T0 + i * 10_000_000
+            msg = imu_msg(i, s, np.zeros(3), 0.0 * accel[i] if i in failed else accel[i], "imu")
+            msg.angular_velocity_covariance = np.r_[-1.0, np.zeros(8)]
+            cov = np.full(9, 0.02)
+            cov[0] = -1.0 if i in failed else 0.02
+            msg.linear_acceleration_covariance = cov
+            writer.write(conn, s, TS.serialize_cdr(msg, conn.msgtype))
+    rec = decode(bag)
+    assert rec.warnings == [
+        "angular_velocity_covariance[0] is -1 in every message: the driver marks its "
+        "angular_velocity as no estimate (sensor_msgs/msg/Imu: 'disregard the associated "
+        "estimate'); gyro_x, gyro_y, gyro_z read as missing there",
+        "linear_acceleration_covariance[0] is -1 in 4 of 500 messages: the driver marks its "
+        "linear_acceleration as no estimate (sensor_msgs/msg/Imu: 'disregard the associated "
+        "estimate'); accel_x, accel_y, accel_z read as missing there",
+    ]
+    frames = rec.frames
+    for axis in ("gyro_x", "gyro_y", "gyro_z"):
+        assert frames[axis].is_nan().all()
+    kept = np.setdiff1d(np.arange(n), sorted(failed))
+    for k, axis in enumerate(("accel_x", "accel_y", "accel_z")):
+        values = frames[axis].to_numpy()
+        assert np.flatnonzero(np.isnan(values)).tolist() == sorted(failed)
+        np.testing.assert_array_equal(values[kept], accel[kept, k])
