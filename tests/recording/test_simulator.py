@@ -9,6 +9,8 @@ import pytest
 
 from imupipe.device.adis16364 import (
     DIAG_OVER_RANGE,
+    DIAG_SUPPLY_HIGH,
+    DIAG_SUPPLY_LOW,
     EA_BIT,
     ND_BIT,
     REGISTERS,
@@ -303,3 +305,69 @@ def test_register_writes_reconfigure():
     assert word & ND_BIT and not dev.read_register(REGISTERS["XGYRO_OUT"]) & ND_BIT
     with pytest.raises(ConfigError, match="smpl_prd"):
         VirtualADIS16364(DeviceConfig(rate_method="smpl_prd", output_rate_hz=100.0))
+
+
+@pytest.mark.parametrize(
+    ("volts", "diag"), [(5.3, DIAG_SUPPLY_HIGH), (5.2, 0), (4.8, 0), (4.7, DIAG_SUPPLY_LOW)]
+)
+def test_supply_out_of_range_sets_its_diag_bit_and_ea_beside_nd(volts: float, diag: int):
+    """The datasheet's supply limits (4.75–5.25 V) flag DIAG_STAT bit 1 (high) or 0 (low);
+    a flag sets EA (bit 14) in every word of the frame beside ND (bit 15: new data)."""
+    scenario = replace(Scenario(), supply=Supply(nominal_v=volts))
+    block = VirtualADIS16364(DeviceConfig(), scenario, seed=3).frames(20)
+    assert np.all(block.diag_stat == diag)
+    top = block.burst & (ND_BIT | EA_BIT)
+    assert np.all(top == (ND_BIT | EA_BIT if diag else ND_BIT))
+
+
+def test_every_frame_of_the_divider_is_a_new_internal_sample_at_its_time():
+    """rate_method "smpl_prd": frame k is internal sample k + 1, stamped (k + 1)/f_int after the
+    start, each with ND set (the first one too)."""
+    config = config_for_rate(819.2)
+    block = VirtualADIS16364(config, seed=4, start_time_ns=0).frames(50)
+    expected = np.rint(np.arange(1, 51) / config.internal_rate_sps * 1e9).astype(np.int64)
+    np.testing.assert_array_equal(block.stamp_ns, expected)
+    assert np.all(block.burst & ND_BIT)
+
+
+def test_frames_of_no_or_negative_count_are_refused():
+    dev = VirtualADIS16364(DeviceConfig(), seed=0)
+    for n in (0, -1):
+        with pytest.raises(ValueError, match="n >= 1"):
+            dev.frames(n)
+
+
+def test_register_reads_walk_the_same_frames_as_bulk_reads():
+    """The first output-register read of a fresh part is frame 0's word (ND set), the next
+    burst read frame 1's: the register path and the bulk path give one sequence."""
+    bulk = VirtualADIS16364(DeviceConfig(), seed=5).frames(2).burst
+    dev = VirtualADIS16364(DeviceConfig(), seed=5)
+    outputs = ("XGYRO_OUT", "YGYRO_OUT", "ZGYRO_OUT", "XACCL_OUT", "YACCL_OUT", "ZACCL_OUT")
+    first = [dev.read_register(REGISTERS[name]) for name in outputs]
+    assert first == [int(w) for w in bulk[0, 1:7]]
+    assert dev.burst_read() == [int(w) for w in bulk[1]]
+
+
+def test_fresh_registers_serial_number_and_byte_writes():
+    """Writable registers start at 0 (MSC_CTRL at 0x0006), the serial number reads back whole
+    (odd too), and a register written twice holds the second value: each byte write replaces
+    its byte."""
+    dev = VirtualADIS16364(DeviceConfig(serial_number=0x1235), seed=0)
+    assert dev.read_register(REGISTERS["XGYRO_OFF"]) == 0
+    assert dev.read_register(REGISTERS["GPIO_CTRL"]) == 0
+    assert dev.read_register(REGISTERS["MSC_CTRL"]) == 0x0006
+    assert dev.read_register(REGISTERS["SERIAL_NUM"]) == 0x1235
+    dev.write_register(REGISTERS["XGYRO_OFF"], 0x0F0F)
+    dev.write_register(REGISTERS["XGYRO_OFF"], 0x1020)
+    assert dev.read_register(REGISTERS["XGYRO_OFF"]) == 0x1020
+
+
+def test_the_75_dps_range_reconfigures_and_the_stamps_run_on():
+    """SENS_AVG written mid-run to the ±75 °/s range (code 1): the scale becomes 0.0125 °/s
+    per LSB and the next frame follows the last one by one period (no repeated stamp)."""
+    dev = VirtualADIS16364(DeviceConfig(), seed=6)
+    before = dev.frames(5).stamp_ns
+    dev.write_register(REGISTERS["SENS_AVG"], 0x0104)
+    assert dev.config.sens_avg == 0x0104 and dev.config.gyro_scale_dps == 0.0125
+    after = dev.frames(5).stamp_ns
+    assert np.all(np.diff(np.r_[before, after]) == 10_000_000)
