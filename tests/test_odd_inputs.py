@@ -609,3 +609,59 @@ def test_gyros_marked_no_estimate_are_left_out_as_the_message_says(tmp_path: Pat
         assert f"{axis} is NaN/inf in every frame (an axis the sensor does not provide?)" in w
     assert "is 0 in every sample" not in w
     assert set(report["axes"]) == {"accel_x", "accel_y", "accel_z"}
+
+
+def write_imu_stamped(path: Path, header_ns: np.ndarray, log_ns: np.ndarray, gyro, accel) -> Path:
+    """One Imu topic whose header stamps and MCAP log times differ."""
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        w.write_chunk(cid, log_ns, imu_payloads(header_ns, gyro, accel))
+        w.finish()
+    return path
+
+
+@pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
+def test_a_reset_of_the_stamping_clock_is_placed_by_the_log_time(
+    tmp_path: Path, capsys, budget: list[str]
+) -> None:
+    """A driver stamping with the sensor's clock restarts after frame 6000, 3 s later, its
+    clock from 0.2 s: the stamps jump back by ~560 s. Before session 39 the record read as
+    60 s long at ~2× its rate (N 29 % low, silently but for a rate warning). The messages after
+    the reset are placed by the receive times (log time, with latency), so the restart is a
+    3 s gap, masked like any other: the same grid and N as stamps that never reset."""
+    stamps, gyro, accel = imu_stream()
+    true_ns = stamps - stamps[0] + np.where(np.arange(N) >= 6000, 3 * 10**9, 0)
+    rng = np.random.default_rng(7)
+    log_ns = np.maximum.accumulate(
+        stamps[0] + true_ns + np.abs(rng.normal(0, 3e6, N)).astype(np.int64)
+    )
+    header_ns = np.where(
+        np.arange(N) < 6000, 500 * 10**9 + true_ns, 2 * 10**8 + true_ns - true_ns[6000]
+    )
+    for folder in ("reset", "never"):
+        (tmp_path / folder).mkdir()
+    reset = write_imu_stamped(tmp_path / "reset" / "f.mcap", header_ns, log_ns, gyro, accel)
+    never = write_imu_stamped(
+        tmp_path / "never" / "f.mcap", stamps[0] + true_ns, log_ns, gyro, accel
+    )
+    code, report, err = analyze(reset, capsys, *budget)
+    assert code == 0, err
+    _, expected, _ = analyze(never, capsys, *budget)
+    assert (
+        "header.stamp jumps back 1 time(s) (by 559.79 s at message 6000: the clock that stamps "
+        "them was reset, e.g. a driver restarted with the sensor's clock): the messages after "
+        "each jump are placed by the MCAP log time" in warnings_of(report)
+    )
+    assert "going backwards" not in err and "measured mean rate" not in err
+    assert report["input"]["duration_s"] == pytest.approx(expected["input"]["duration_s"])
+    assert report["input"]["counts"] == expected["input"]["counts"]
+    assert report["input"]["counts"]["masked_samples"] == 300  # the 3 s of the restart
+    assert expected["input"]["rate_hz"] == 100.0  # the restart's 3 s, from the latencies' medians:
+    assert report["input"]["rate_hz"] == pytest.approx(100.0, rel=1e-6)  # 27 µs off here
+    for axis in AXES:
+        n, truth = (
+            report["axes"][axis]["ieee952"]["random_walk"],
+            expected["axes"][axis]["ieee952"]["random_walk"],
+        )
+        assert n["value"] == pytest.approx(truth["value"], rel=1e-6)

@@ -29,6 +29,7 @@ columns (in memory, or appended to files in a spill directory), and
 
 from __future__ import annotations
 
+import itertools
 import mmap
 from collections import defaultdict
 from collections.abc import Callable, Iterable
@@ -256,19 +257,29 @@ class _SpilledColumn:
         return np.memmap(self.file, self.dtype, "c", shape=(self.rows, *self.row_shape))
 
 
+CLOCK_RESET_NS = 1_000_000_000
+"""A time stamp this far (ns) before the one before it is a reset of the clock that stamps the
+messages (a driver restarted with the sensor's clock from 0), not a late stamp."""
+MAX_CLOCK_RESETS = 10
+"""Header-stamp clock resets placed by the log time (:func:`_placed_after_resets`); with more,
+the stamps are the interleaved clocks of several sensors, or broken."""
+
+
 class _Steps:
-    """The non-increasing steps x[i + 1] <= x[i] of a series seen batch by batch, and whether any
-    value is non-zero."""
+    """The non-increasing steps x[i + 1] <= x[i] of a series seen batch by batch, those going
+    back by more than :data:`CLOCK_RESET_NS` (resets), and whether any value is non-zero."""
 
     def __init__(self) -> None:
         self.last: int | None = None
         self.count = 0
+        self.resets = 0
         self.nonzero = False
 
     def add(self, x: np.ndarray) -> None:
         if len(x):
-            first_step_bad = self.last is not None and x[0] <= self.last
-            self.count += int(first_step_bad) + int(np.count_nonzero(x[1:] <= x[:-1]))
+            steps = np.diff(x, prepend=x[0] if self.last is None else self.last)
+            self.count += int(np.count_nonzero(steps <= 0)) - int(self.last is None)
+            self.resets += int(np.count_nonzero(steps < -CLOCK_RESET_NS))
             self.last = int(x[-1])
             self.nonzero = self.nonzero or bool(x.any())
 
@@ -540,13 +551,36 @@ def _uses_log_time(steps: dict[str, _Steps], warnings: list[str]) -> bool:
     return False
 
 
+def _placed_after_resets(stamps: np.ndarray, log: np.ndarray, warnings: list[str]) -> np.ndarray:
+    """The header ``stamps`` (ns) with each run after a clock reset (a step back by more than
+    :data:`CLOCK_RESET_NS`) moved onto the first run's clock by the MCAP ``log`` time: by the
+    difference of the runs' median ``log - stamps`` (the receive latency, the same on both
+    sides, cancels); a new array.  The time between the runs is then the log time's, a gap
+    like any other, instead of a jump back by the clock's age that would shorten the record
+    and raise its rate."""
+    resets = np.flatnonzero(np.diff(stamps) < -CLOCK_RESET_NS) + 1
+    edges = [0, *resets.tolist(), len(stamps)]
+    offsets = [int(np.median(log[a:b] - stamps[a:b])) for a, b in itertools.pairwise(edges)]
+    out = stamps.copy()
+    for (a, b), offset in zip(itertools.pairwise(edges), offsets, strict=True):
+        out[a:b] += offset - offsets[0]
+    back = (stamps[resets - 1] - stamps[resets]) / 1e9
+    warnings.append(
+        f"header.stamp jumps back {len(resets)} time(s) (by {back[0]:.6g} s at message "
+        f"{resets[0]}{'' if len(resets) == 1 else ', …'}: the clock that stamps them was reset, "
+        "e.g. a driver restarted with the sensor's clock): the messages after each jump are "
+        "placed by the MCAP log time"
+    )
+    return out
+
+
 def _seconds(cols: dict[str, np.ndarray], use_log: bool, keep_stamps: bool) -> np.ndarray:
     """Seconds since the first frame (f64) on the chosen base, written over a buffer that is not
     needed afterwards: the log time, else the stamps themselves when ``keep_stamps`` is false;
     whichever is overwritten leaves ``cols``.  The time base costs no extra full-length array
     (24 h at 1 kHz: 691 MB each)."""
     log = cols.pop("log_time_ns", None)
-    base = log if use_log else cols["stamp_ns"]
+    base = log if use_log else cols.pop("placed_stamp_ns", cols["stamp_ns"])
     if log is not None:
         out = log.view(np.float64)
     elif not keep_stamps:
@@ -603,13 +637,17 @@ class ScannedRecording:
         """Frames of the channel."""
         return self.channel.rows
 
-    def _raw(self, columns: frozenset[str] | None, use_log: bool) -> frozenset[str] | None:
+    def _raw(
+        self, columns: frozenset[str] | None, use_log: bool, placed: bool
+    ) -> frozenset[str] | None:
         """The raw columns a spilled channel maps to build ``columns`` (None: all kept)."""
         if self.channel.spill is None or columns is None:
             return None
         raw = set(columns)
         if "t_s" in columns:
             raw.add("log_time_ns" if use_log else "stamp_ns")
+        if placed:
+            raw |= {"log_time_ns", "stamp_ns"}
         if self.kind == "imu" and "temp_c" in columns:
             raw.add("stamp_ns")  # temperature is interpolated over the stamps
         return frozenset(raw)
@@ -617,17 +655,25 @@ class ScannedRecording:
     def recording(self, columns: frozenset[str] | None = None) -> ImuRecording | None:
         """The frame of the decode contract, or of ``columns`` only (``nonfinite``:
         :func:`nonfinite_bits`, if named); None if ``t_s`` needs the log time that the scan
-        only counted (``keep_one_time_base``): the file must then be read again, keeping it."""
+        only counted (``keep_one_time_base``): the file must then be read again, keeping it.
+        Header stamps whose clock was reset (at most :data:`MAX_CLOCK_RESETS` times) are placed
+        by the log time after each reset (:func:`_placed_after_resets`)."""
         warnings = list(self.warnings) + _no_estimate_warnings(self.channel.no_estimate, self.rows)
-        use_log = (columns is None or "t_s" in columns) and _uses_log_time(
-            self.channel.steps, warnings
-        )
-        if use_log and "log_time_ns" in self.channel.skip:
+        timed = columns is None or "t_s" in columns
+        use_log = timed and _uses_log_time(self.channel.steps, warnings)
+        steps = self.channel.steps
+        placed = timed and not use_log and 0 < steps["stamp_ns"].resets <= MAX_CLOCK_RESETS
+        placed &= steps["log_time_ns"].resets == 0  # (a log time copied from the stamps)
+        if (use_log or placed) and "log_time_ns" in self.channel.skip:
             return None
         n = self.rows
-        cols = self.channel.concat(self._raw(columns, use_log))
+        cols = self.channel.concat(self._raw(columns, use_log, placed))
+        if placed:
+            cols["placed_stamp_ns"] = _placed_after_resets(
+                cols["stamp_ns"], cols["log_time_ns"], warnings
+            )
         t_s, time_source = None, ""
-        if columns is None or "t_s" in columns:
+        if timed:
             keep_stamps = columns is None or not columns.isdisjoint({"stamp_ns", "temp_c"})
             t_s = _seconds(cols, use_log, keep_stamps)
             time_source = "log_time" if use_log else "header.stamp"

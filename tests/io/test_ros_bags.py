@@ -184,3 +184,61 @@ def test_a_vector_marked_no_estimate_is_read_as_missing(tmp_path: Path, storage)
         values = frames[axis].to_numpy()
         assert np.flatnonzero(np.isnan(values)).tolist() == sorted(failed)
         np.testing.assert_array_equal(values[kept], accel[kept, k])
+
+
+@pytest.mark.parametrize("keep_one", [False, True])
+def test_runs_after_clock_resets_are_placed_by_the_log_time(tmp_path: Path, keep_one) -> None:
+    """Header stamps from a sensor clock that two driver restarts reset (100 Hz; the restarts
+    take 2.5 s and 7 s of log time, received 3 ms after each sample): t_s follows the log
+    time across each reset and the stamps within each run; stamp_ns stays the header's.
+    Read again when the scan kept one time base only."""
+    n, first, second = 900, 300, 600
+    true_ns = np.arange(n) * 10_000_000 + np.where(np.arange(n) >= first, 2_500_000_000, 0)
+    true_ns += np.where(np.arange(n) >= second, 7_000_000_000, 0)
+    run = np.searchsorted([first, second], np.arange(n), side="right")
+    clock_zero = np.array([40_000_000_000, 1_000_000_000, 500_000_000])  # each run's clock at 0
+    run_start = true_ns[[0, first, second]]
+    header = clock_zero[run] + true_ns - run_start[run]
+    bag = tmp_path / "bag"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=TS)
+        for i in range(n):
+            msg = imu_msg(i, int(header[i]), np.zeros(3), np.array([0, 0, 9.8]), "imu")
+            writer.write(
+                conn, T0 + int(true_ns[i]) + 3_000_000, TS.serialize_cdr(msg, conn.msgtype)
+            )
+    rec = decode(bag, keep_one_time_base=keep_one)
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), header)
+    np.testing.assert_allclose(rec.frames["t_s"].to_numpy(), true_ns / 1e9, rtol=0, atol=1e-9)
+    assert rec.time_source == "header.stamp"
+    assert rec.warnings == [
+        "header.stamp jumps back 2 time(s) (by 41.99 s at message 300, …: the clock that stamps "
+        "them was reset, e.g. a driver restarted with the sensor's clock): the messages after "
+        "each jump are placed by the MCAP log time"
+    ]
+
+
+@pytest.mark.parametrize("resets", [1, 11])
+def test_resets_are_not_placed_by_a_log_time_that_resets_too_or_when_too_many(
+    tmp_path: Path, resets: int
+) -> None:
+    """A log time copied from the stamps resets with them, and eleven resets are the clocks of
+    several sensors or broken stamps: the stamps are then left as they are (conditioning names
+    the steps back). (Eleven steps back in the stamps and none in the log time would make the
+    log time the time base: here it repeats two values.)"""
+    n = 600
+    run = np.arange(n) * (resets + 1) // n
+    header = 5_000_000_000 + (np.arange(n) - run * (n // (resets + 1))) * 10_000_000
+    log = T0 + np.arange(n) * 10_000_000
+    log[[100, 200]] = log[[99, 199]]
+    if resets == 1:
+        log = header
+    bag = tmp_path / "bag"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=TS)
+        for i in range(n):
+            msg = imu_msg(i, int(header[i]), np.zeros(3), np.array([0, 0, 9.8]), "imu")
+            writer.write(conn, int(log[i]), TS.serialize_cdr(msg, conn.msgtype))
+    rec = decode(bag)
+    assert rec.warnings == [] and rec.time_source == "header.stamp"
+    np.testing.assert_array_equal(rec.frames["t_s"].to_numpy(), (header - header[0]) / 1e9)
