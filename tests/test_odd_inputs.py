@@ -35,6 +35,7 @@ from imupipe.device.frame_schema import (
     encode_frames,
     message_definition,
 )
+from imupipe.io import mcap_scan
 from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.recording.recorder import FrameWriter
 from imupipe.recording.simulator import VirtualADIS16364
@@ -665,3 +666,18 @@ def test_a_reset_of_the_stamping_clock_is_placed_by_the_log_time(
             expected["axes"][axis]["ieee952"]["random_walk"],
         )
         assert n["value"] == pytest.approx(truth["value"], rel=1e-6)
+
+
+def test_an_imu_topic_whose_only_chunk_is_over_the_budget_says_why(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    """A writer that put the whole IMU topic in one chunk larger than the memory budget lets
+    a chunk take: the one-line error says the chunk was skipped and which option raises it,
+    not only that the topic has no readable messages."""
+    monkeypatch.setattr(mcap_scan, "MIN_CHUNK_LIMIT", 100_000)  # the 0.9 MB chunk is too big
+    stamps, gyro, accel = imu_stream(3000)
+    path = write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    code, _, err = analyze(path, capsys, "--memory-budget-gb", "0.001")
+    assert code == 2 and err.count("\n") == 1
+    assert err.startswith(f"imupipe: error: {path}: topic /imu has no readable messages (a chunk")
+    assert "a chunk may take under the memory budget (--memory-budget-gb); skipped unread" in err

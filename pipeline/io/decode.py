@@ -897,7 +897,8 @@ def scan(
             f"{path}: topic {topic!r} is not an IMU topic (IMU topics: {', '.join(imu_topics)})"
         )
     if topic not in channels:
-        raise InputError(f"{path}: topic {topic} has no readable messages")
+        why = f" ({warnings[0]}{'; …' if len(warnings) > 1 else ''})" if warnings else ""
+        raise InputError(f"{path}: topic {topic} has no readable messages{why}")
     for columns_of_channel in channels.values():
         columns_of_channel.seal()
     device = None

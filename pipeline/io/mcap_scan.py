@@ -635,7 +635,8 @@ class McapScanner:
                 end,
                 size,
                 f"it declares {size} bytes uncompressed ({length} stored), more than the "
-                f"{limit} a chunk may take under the memory budget; skipped unread",
+                f"{limit} a chunk may take under the memory budget (--memory-budget-gb); "
+                "skipped unread",
             )
         )
         return True
