@@ -52,6 +52,8 @@ def test_readme_example_records_and_analyses(tmp_path: Path) -> None:
     written = json.loads((tmp_path / "run.imupipe" / "report.json").read_text())
     assert written == result.to_dict()
     assert written["axes"]["gyro_x"]["ieee952"]["random_walk"]["value"] == n.value
+    # by default the whole recording, from its first frame
+    assert written["input"]["window_s"] == [0.0, None] and written["input"]["frames"] == 9000
     assert n.unit == "rad/s/sqrt(Hz)"
     # the paper's N of 0.05 °/√s is 8.73e-4 rad/s/√Hz; 90 s gives it within ~10 %
     assert n.value == pytest.approx(0.05 * 3.141592653589793 / 180, rel=0.1)

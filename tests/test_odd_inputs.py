@@ -681,3 +681,19 @@ def test_an_imu_topic_whose_only_chunk_is_over_the_budget_says_why(
     assert code == 2 and err.count("\n") == 1
     assert err.startswith(f"imupipe: error: {path}: topic /imu has no readable messages (a chunk")
     assert "a chunk may take under the memory budget (--memory-budget-gb); skipped unread" in err
+
+
+@pytest.mark.parametrize("n", [15, 16])
+def test_sixteen_frames_are_the_fewest_analysed(tmp_path: Path, capsys, n: int) -> None:
+    """MIN_FRAMES: 16 consecutive clean frames give the shortest averaging times; 15 are one
+    clear line and exit 2."""
+    stamps, gyro, accel = imu_stream(n)
+    path = write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    code, report, err = analyze(path, capsys)
+    if n == 15:
+        assert code == 2 and err == (
+            f"imupipe: error: {path}: the longest clean segment has 15 frames, too few for any "
+            "averaging time (need at least 16)\n"
+        )
+    else:
+        assert code == 0 and report["input"]["frames"] == 16

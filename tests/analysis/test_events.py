@@ -62,8 +62,12 @@ def with_bump(y: np.ndarray) -> np.ndarray:
     return y
 
 
-def write_mcap(path: Path, y: np.ndarray) -> Path:
+def write_mcap(path: Path, y: np.ndarray, lost: slice = slice(0, 0)) -> Path:
+    """An Imu MCAP of ``y`` at 100 Hz without the frames ``lost`` (a gap)."""
     stamps = 1_700_000_000_000_000_000 + np.arange(len(y), dtype=np.int64) * 10_000_000
+    keep = np.ones(len(y), dtype=bool)
+    keep[lost] = False
+    stamps, y = stamps[keep], y[keep]
     with open(path, "wb") as f:
         w = BulkWriter(f, profile="ros2")
         sid = w.register_schema("sensor_msgs/msg/Imu", "ros2msg", b"")
@@ -142,6 +146,26 @@ def test_the_bump_is_excised_on_every_axis_and_the_terms_return_to_the_clean_one
         k = int(np.argmin(np.abs(np.asarray(clean["axes"][name]["allan"]["tau_s"]) - 20.0)))
         assert adev["bump_kept"][k] > 1.15 * adev["clean"][k]
         assert adev["bump"][k] == pytest.approx(adev["clean"][k], rel=0.03)
+
+
+def test_a_gap_and_an_event_are_both_left_out_of_the_allan_sums(reports, tmp_path) -> None:
+    """The bumped recording without 1 s of frames at 600 s (masked by the default gap
+    policy): the same bump is found and excised, and every axis' Allan sums lose the terms
+    that touch either the event or the gap."""
+    path = write_mcap(tmp_path / "imu.mcap", with_bump(noise(7)), lost=slice(60_000, 60_100))
+    imupipe.analyze(path, tmp_path / "out", rrd=False, figures=False, loop=False)
+    doc = json.loads((tmp_path / "out" / "report.json").read_text())
+    clean = reports["clean"]
+    (found,) = doc["events"]["found"]
+    assert tuple(found["axes"]) == BUMP["axes"]
+    assert doc["input"]["counts"]["masked_samples"] == 100
+    k = found["excised"]["samples"]
+    for name in AXES:
+        allan = doc["axes"][name]["allan"]
+        m = np.round(np.asarray(allan["tau_s"]) * RATE_HZ).astype(int)
+        lost = np.asarray(clean["axes"][name]["allan"]["n_terms"])[: len(m)] - allan["n_terms"]
+        small = m < 1000  # the two runs' term windows do not overlap
+        np.testing.assert_array_equal(lost[small], (k + 2 * m - 1 + 100 + 2 * m - 1)[small])
 
 
 def test_clean_recording_yields_no_event_and_unchanged_numbers(reports, tmp_path) -> None:
