@@ -156,6 +156,20 @@ class _CdrMessages:
     def __len__(self) -> int:
         return len(self.rows)
 
+    def repeats(self, before: np.ndarray | None) -> np.ndarray:
+        """Which messages repeat the one before them (``before``: the row of the message
+        preceding the first, if any) in every byte read: the same stamp and values, one
+        message recorded twice (bool, n).  Only rows whose stamp repeats are compared whole."""
+        stamp = self.rows[:, 4:12].view("<i8")[:, 0]
+        same = np.flatnonzero(stamp[1:] == stamp[:-1]) + 1
+        out = np.zeros(len(self), dtype=bool)
+        out[same] = (self.rows[same] == self.rows[same - 1]).all(axis=1)
+        out[0] = before is not None and np.array_equal(self.rows[0], before)
+        return out
+
+    def __getitem__(self, keep: np.ndarray) -> _CdrMessages:
+        return _CdrMessages(self.rows[keep], self.log_time[keep])
+
     def stamps(self) -> np.ndarray:
         """header.stamp (sec i32 @4, nanosec u32 @8 of the payload) → ns, int64."""
         sec = self.rows[:, 4:8].view("<i4")[:, 0].astype(np.int64)
@@ -300,6 +314,20 @@ class _Columns:
         self.rows = 0
         self.no_estimate: defaultdict[str, int] = defaultdict(int)
         """Messages whose vector (a key of :data:`NO_ESTIMATE_FIELDS`) is marked no estimate."""
+        self.repeated = 0
+        """Messages dropped as repeats of the one before (:meth:`_CdrMessages.repeats`)."""
+        self.last_row: np.ndarray | None = None
+
+    def without_repeats(self, m: _CdrMessages) -> _CdrMessages:
+        """``m`` without the messages that repeat the one before them, counted."""
+        if not len(m):
+            return m
+        repeats = m.repeats(self.last_row)
+        self.last_row = m.rows[-1].copy()
+        if not repeats.any():
+            return m
+        self.repeated += int(repeats.sum())
+        return m[~repeats]
 
     def add(self, **cols: np.ndarray) -> None:
         for k, v in cols.items():
@@ -659,6 +687,11 @@ class ScannedRecording:
         Header stamps whose clock was reset (at most :data:`MAX_CLOCK_RESETS` times) are placed
         by the log time after each reset (:func:`_placed_after_resets`)."""
         warnings = list(self.warnings) + _no_estimate_warnings(self.channel.no_estimate, self.rows)
+        if self.channel.repeated:
+            warnings.append(
+                f"{self.channel.repeated} message(s) repeat the one before them byte for byte "
+                "(the same stamp and values: recorded twice?): each is read once"
+            )
         timed = columns is None or "t_s" in columns
         use_log = timed and _uses_log_time(self.channel.steps, warnings)
         steps = self.channel.steps
@@ -833,7 +866,10 @@ def scan(
         waiting_rows.pop(name)
         rows = np.concatenate([r for r, _ in batches])
         log_time = np.concatenate([t for _, t in batches]).view(np.int64)
-        decoders[topic_kind[name]](_CdrMessages(rows, log_time), channels[name])
+        messages = _CdrMessages(rows, log_time)
+        if topic_kind[name] in IMU_KINDS:  # the same sample recorded twice is one sample
+            messages = channels[name].without_repeats(messages)
+        decoders[topic_kind[name]](messages, channels[name])
 
     frame_ids: dict[str, str] = {}  # the header.frame_id of each topic's first message
     frame_sets: dict[str, tuple[str, ...]] = {}  # those of its first FRAME_ID_SAMPLE messages

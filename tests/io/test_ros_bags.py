@@ -11,7 +11,9 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from imupipe.errors import InputError
-from imupipe.io.decode import decode
+from imupipe.io.decode import IMU_SCHEMA, decode
+from imupipe.io.mcap_bulk import BulkWriter
+from imupipe.testing.ros_cdr import imu_payloads
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 T0 = 1_700_000_000_000_000_000
@@ -242,3 +244,51 @@ def test_resets_are_not_placed_by_a_log_time_that_resets_too_or_when_too_many(
     rec = decode(bag)
     assert rec.warnings == [] and rec.time_source == "header.stamp"
     np.testing.assert_array_equal(rec.frames["t_s"].to_numpy(), (header - header[0]) / 1e9)
+
+
+def test_a_message_recorded_twice_is_read_once(tmp_path: Path) -> None:
+    """Every 50th message written twice in a row (a publisher or recorder repeating it: the
+    same bytes, a later log time) is read once; two messages with the same stamp and other
+    values (samples stamped together) both stay."""
+    n = 1000
+    stamps, gyro, accel = T0 + np.arange(n) * 10_000_000, np.zeros((n, 3)), np.zeros((n, 3))
+    gyro[:, 0] = np.arange(n)
+    stamps[501] = stamps[500]  # a pair stamped together, values differ
+    bag = tmp_path / "bag"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=TS)
+        for i in range(n):
+            raw = TS.serialize_cdr(
+                imu_msg(i, int(stamps[i]), gyro[i], accel[i], "imu"), conn.msgtype
+            )
+            writer.write(conn, int(stamps[i]), raw)
+            if i % 50 == 0:
+                writer.write(conn, int(stamps[i]) + 1000, raw)
+    rec = decode(bag)
+    np.testing.assert_array_equal(rec.frames["gyro_x"].to_numpy(), np.arange(n))
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), stamps)
+    assert rec.warnings == [
+        "20 message(s) repeat the one before them byte for byte (the same stamp and values: "
+        "recorded twice?): each is read once"
+    ]
+
+
+def test_a_repeat_across_decoded_batches_is_found(tmp_path: Path) -> None:
+    """The first message of a chunk repeating the last of the chunk before, where the decoder
+    takes the two chunks in separate batches (40,000 messages each)."""
+    n = 60_000
+    stamps = T0 + np.arange(n, dtype=np.int64) * 10_000_000
+    gyro = np.zeros((n, 3))
+    gyro[:, 1] = np.arange(n)
+    payloads = imu_payloads(stamps, gyro, np.zeros((n, 3)))
+    path = tmp_path / "f.mcap"
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        w.write_chunk(cid, stamps[:40_000], payloads[:40_000])
+        second = np.r_[39_999, 40_000:n]
+        w.write_chunk(cid, stamps[second] + 1, payloads[second])
+        w.finish()
+    rec = decode(path)
+    np.testing.assert_array_equal(rec.frames["gyro_y"].to_numpy(), np.arange(n))
+    assert rec.warnings[0].startswith("1 message(s) repeat the one before them byte for byte")
