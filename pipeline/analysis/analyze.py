@@ -51,7 +51,7 @@ from imupipe.pages import small_pages
 from imupipe.progress import StageProgress
 from imupipe.stats import robust
 from imupipe.stats.allan import FIT_MIN_TERMS, AllanCurve, allan_curves, tau_factors
-from imupipe.stats.edf import b1_noise_id
+from imupipe.stats.edf import ACF_WINDOW, b1_noise_id, noise_ids
 from imupipe.vocab import AXES, sensor_of
 
 MEMORY_BUDGET_BYTES = 2_000_000_000
@@ -474,6 +474,8 @@ def compile_kernels(loop: bool = True) -> None:
     white = rng.standard_normal(4096)
     axis_result("gyro_x", white, allan_curves([white], 0.01)[0], 0.01, None, None, loop)
     b1_noise_id(white, 100)  # white phase: the R(n) branch
+    long = np.cumsum(rng.standard_normal(ACF_WINDOW + 2))
+    noise_ids(long, np.array([1]), window=True)  # a record's window of averages (its p)
     psd_line(
         white, 0.01, 10.0, 20.0, spike_candidate(white + 50.0 * (np.arange(4096) == 7), 0.01).spikes
     )

@@ -419,7 +419,9 @@ def allan_curves(
     ``m`` defaults to :func:`tau_factors`; ``correction`` (one axis only) is subtracted from
     y.  Per tau: noise type by :func:`imupipe.stats.edf.noise_ids`, with ``redder_tail`` (at
     fewer than 30 averages the type may only stay or get redder; ``stable32_noise_id`` keeps
-    Stable32's own identification, which may turn white again there, as its tables do), edf by
+    Stable32's own identification, which may turn white again there, as its tables do, and
+    reads every average where the identification may read a centred window of them,
+    ``window``), edf by
     :func:`imupipe.stats.edf.edf_oadev`, interval by :func:`imupipe.stats.edf.chi2_interval` at
     ``confidence`` (0.683, Stable32's default).  ``excluded`` (bool (n,)): the gap-tolerant
     estimate (module docstring); factors without any term are left out, the edf
@@ -445,7 +447,9 @@ def allan_curves(
         x = phase(cols[group], tau0, correction, excluded)
         adev = _oadev_of_phase(x, tau0, m, runs)
         for i in range(x.shape[0]):
-            alpha = noise_ids(x[i], m, redder_tail=not stable32_noise_id)
+            alpha = noise_ids(
+                x[i], m, redder_tail=not stable32_noise_id, window=not stable32_noise_id
+            )
             edf = np.array(
                 [
                     edf_oadev(int(a), int(mj), n + 1)

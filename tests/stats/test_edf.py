@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from imupipe.stats import edf
 from imupipe.stats.allan import allan_curves, phase
 from imupipe.stats.edf import (
     acf_noise_id,
@@ -164,3 +165,53 @@ def test_a_gapped_curve_computes_each_run_lengths_edf_once() -> None:
     assert np.array_equal(first.edf, again.edf)
     for args in [(0, 10, 2001), (-1, 37, 900), (2, 100, 250), (1, 5, 30)]:
         assert edf_oadev(*args) == edf_oadev.__wrapped__(*args)
+
+
+def _white_window_in_random_walk(window: int) -> np.ndarray:
+    """Phase of 4 windows of frequency samples: a random walk of frequency (alpha -2) but for
+    the centred window, white (alpha 0)."""
+    rng = np.random.default_rng(21)
+    y = np.cumsum(rng.standard_normal(4 * window))
+    y[3 * window // 2 : 5 * window // 2] = rng.standard_normal(window)
+    return np.concatenate([[0.0], np.cumsum(y)])
+
+
+def test_a_long_series_is_identified_from_its_centred_window(monkeypatch) -> None:
+    """Series of more than ACF_WINDOW averages: with ``window`` their type is read from the
+    centred ACF_WINDOW averages (here white inside a random walk), where that is clear of the
+    boundaries; closer than ACF_WINDOW_MARGIN, or without ``window`` (Stable32's own
+    identification), from every average."""
+    monkeypatch.setattr(edf, "ACF_WINDOW", 4096)
+    x = _white_window_in_random_walk(4096)
+    m = np.array([1, 2, 8])  # 16384, 8192 and 2048 averages: the last is not long
+    assert noise_ids(x, m).tolist() == [-2, -2, -2]
+    # m = 1: the window is the white part (p 0.023; a third of the way in, -0.96); m = 2:
+    # its window spans random walk too (p -1.87)
+    assert noise_ids(x, m, window=True).tolist() == [0, -2, -2]
+    monkeypatch.setattr(edf, "ACF_WINDOW_MARGIN", 0.5)  # no p is that clear
+    assert noise_ids(x, m, window=True).tolist() == [-2, -2, -2]
+    monkeypatch.setattr(edf, "ACF_WINDOW_MARGIN", 0.1)
+    curves = {
+        own: allan_curves([np.diff(x)], 1.0, m, stable32_noise_id=own)[0].alpha.tolist()
+        for own in (False, True)
+    }
+    assert curves == {False: [0, -2, -2], True: [-2, -2, -2]}
+
+
+def test_the_window_decides_a_white_record_as_every_average_does(monkeypatch) -> None:
+    """The default window on 2**20 white frequency samples: the same types as every average;
+    the window decides m = 1..3 (p within ~0.01 of 0); m = 4 and 8 (2**18 and 2**17
+    averages, not more than the window) read every average."""
+    y = np.random.default_rng(5).standard_normal(1 << 20)
+    x = np.concatenate([[0.0], np.cumsum(y)])
+    m = np.array([1, 2, 3, 4, 8])
+    expected = noise_ids(x, m).tolist()
+    full_path, read_whole = edf._acf_ids, []
+
+    def recording(x, m, *rest):
+        read_whole.extend(m.tolist())
+        return full_path(x, m, *rest)
+
+    monkeypatch.setattr(edf, "_acf_ids", recording)
+    assert noise_ids(x, m, window=True).tolist() == expected == [0] * 5
+    assert set(read_whole) == {4, 8}  # (each thread is given them all)
