@@ -319,13 +319,15 @@ def test_a_time_window_analyses_what_the_same_frames_alone_give(
                     assert value["value"] == pytest.approx(theirs["value"], rel=1e-9)
 
 
-def two_imus_on_one_topic(path: Path, offset_ms: float) -> Path:
-    """Two 100 Hz IMUs (frames imu_left, imu_right; the right one 5× noisier) publishing on
-    /imu, the right one stamped ``offset_ms`` after the left, in arrival order."""
+def two_imus_on_one_topic(
+    path: Path, offset_ms: float, frames: tuple[str, str] = ("imu_left", "imu_right")
+) -> Path:
+    """Two 100 Hz IMUs (``frames``; the right one 5× noisier) publishing on /imu, the right
+    one stamped ``offset_ms`` after the left, in arrival order."""
     stamps, gyro, accel = imu_stream(6000)
     payloads: list[bytes] = [b""] * 12_000
     times = np.empty(12_000, np.int64)
-    for k, frame in enumerate(("imu_left", "imu_right")):
+    for k, frame in enumerate(frames):
         at = stamps + round(k * offset_ms * 1e6)
         rows = imu_payloads(at, gyro * (1 + 4 * k), accel, frame_id=frame)
         payloads[k::2] = [r.tobytes() for r in rows]
@@ -697,3 +699,24 @@ def test_sixteen_frames_are_the_fewest_analysed(tmp_path: Path, capsys, n: int) 
         )
     else:
         assert code == 0 and report["input"]["frames"] == 16
+
+
+def test_mean_and_rms_are_the_received_frames_whatever_masks_the_rest(
+    tmp_path: Path, capsys
+) -> None:
+    """1 % of the messages lost one by one (short holes, bridged at long tau) and 50 in a row
+    (a gap, masked): each axis' mean and rms are those of the frames received, not of the
+    grid's fill; the published curve stops at T/4."""
+    stamps, gyro, accel = imu_stream()
+    keep = np.random.default_rng(4).random(N) > 0.01
+    keep[6000:6050] = False
+    path = write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps[keep], gyro[keep], accel[keep])})
+    code, report, err = analyze(path, capsys)
+    assert code == 0, err
+    assert "are read by the Allan variance as their fill" in warnings_of(report)  # bridged
+    for k, axis in enumerate(AXES):
+        values = (gyro if k < 3 else accel)[keep, k % 3]
+        assert report["axes"][axis]["mean"] == pytest.approx(values.mean(), rel=1e-9, abs=1e-15)
+        assert report["axes"][axis]["rms"] == pytest.approx(values.std(), rel=1e-9)
+        tau = report["axes"][axis]["allan"]["tau_s"]
+        assert tau[-1] <= N * 0.01 / 4 < tau[-1] * 10 ** (1 / 10) * 1.01  # the last before T/4
