@@ -720,3 +720,24 @@ def test_mean_and_rms_are_the_received_frames_whatever_masks_the_rest(
         assert report["axes"][axis]["rms"] == pytest.approx(values.std(), rel=1e-9)
         tau = report["axes"][axis]["allan"]["tau_s"]
         assert tau[-1] <= N * 0.01 / 4 < tau[-1] * 10 ** (1 / 10) * 1.01  # the last before T/4
+
+
+@pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
+def test_two_imus_with_one_frame_id_on_one_topic_are_warned(
+    tmp_path: Path, capsys, budget: list[str]
+) -> None:
+    """Both IMUs' messages in one frame, stamped together: no stamp tells them apart (one
+    IMU stamping its samples in pairs looks the same), so the stream is analysed, but the
+    even and odd messages' gyro noise differs 5× and a warning says what that means (in
+    memory and through the spilled columns). One IMU's pairs (tests/analysis/
+    test_host_stamps.py) and the real recordings read 1.01-1.06×."""
+    path = two_imus_on_one_topic(tmp_path / "f.mcap", 0, ("imu", "imu"))
+    code, report, err = analyze(path, capsys, *budget)
+    assert code == 0, err
+    (w,) = [w for w in report["input"]["warnings"] if w.startswith("the even and odd")]
+    assert w.startswith("the even and odd messages differ as two sensors' would (gyro_x: means ")
+    assert "noise 5× apart; gyro_y: " in w and "accel" not in w  # the accelerations alike
+    assert w.endswith(
+        "one sensor's are alike): several IMUs publishing on one topic under one "
+        "header.frame_id? Their samples are analysed as one stream"
+    )

@@ -34,6 +34,7 @@ from imupipe.analysis.condition import (
     named_frames,
     no_axis_error,
     stuck_warning,
+    two_sensors,
     unanalysable,
 )
 from imupipe.analysis.events import EventsFound, detect, event_mask, fill_excised, fine_means
@@ -153,6 +154,30 @@ def check_frames(rec: ImuRecording, series: ConditionedSeries) -> None:
         f"least {MIN_FRAMES}): the stamps are not one uniformly sampled stream (several IMUs "
         f"publishing on one topic?{frames})"
     )
+
+
+def interleaved_warning(
+    source: ColumnSource, series: ConditionedSeries, rec: ImuRecording
+) -> list[str]:
+    """A warning when the analysed rows of a stream without a frame counter alternate between
+    two sensors on some axis (:func:`imupipe.analysis.condition.two_sensors`): two IMUs
+    publishing on one topic under one ``header.frame_id``, whose samples no stamp tells apart
+    (with two frame ids they are told apart: :func:`check_frames`)."""
+    if rec.frames["counter"].null_count() == 0:  # a device's frames, counted
+        return []
+    found = {}
+    for name in AXES:
+        y = None if name in series.absent_axes else source.column(name, series.rows)
+        if y is not None and (why := two_sensors(y)):
+            found[name] = why
+    if not found:
+        return []
+    return [
+        "the even and odd messages differ as two sensors' would ("
+        + "; ".join(f"{a}: {why}" for a, why in found.items())
+        + "; one sensor's are alike): several IMUs publishing on one topic under one "
+        "header.frame_id? Their samples are analysed as one stream"
+    ]
 
 
 def axis_result(
@@ -410,6 +435,7 @@ def analyze(
         rec = source.conditioning()
         series = condition(rec, options.gaps, options.start_s, options.end_s)
         check_frames(rec, series)
+        alternating = interleaved_warning(source, series, rec)
         t0_stamp_s = float(rec.frames["t_s"][series.rows.start])  # the first analysed sample
         frames = rec.frames.height
         about = replace(rec, frames=rec.frames.clear())
@@ -429,6 +455,7 @@ def analyze(
             raise
         warnings = [
             *series.warnings,
+            *alternating,
             *(stuck_warning(a, why) for a, why in stuck.items()),
             *outlier_warnings(results),
             *filter(None, [specific_force_warning(results)]),

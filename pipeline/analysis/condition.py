@@ -249,6 +249,47 @@ def _count(y: np.ndarray, differs: Callable[[int], np.ndarray]) -> int:
     return sum(int(np.count_nonzero(differs(i))) for i in range(0, len(y), _SCAN))
 
 
+ALTERNATION_ROWS = 4096
+"""Rows of each block whose even and odd rows :func:`two_sensors` compares."""
+ALTERNATION_BLOCKS = 16
+"""Blocks, spread evenly over the record, that :func:`two_sensors` compares."""
+ALTERNATION_Z = 20.0
+"""Even and odd rows' means this many standard errors apart (median over the blocks) read as
+two sensors' biases: one sensor's are |N(0, 1)| apart (median 0.67)."""
+ALTERNATION_RATIO = 1.5
+"""Even and odd rows' noise this many times apart (median over the blocks) reads as two
+sensors': one sensor's agree to ~2 % over a block."""
+
+
+def two_sensors(y: np.ndarray) -> str | None:
+    """Why the even and odd rows of ``y`` look like two sensors' samples, interleaved as two
+    IMUs publishing alternately on one topic would be (None when they look like one sensor's).
+
+    Over up to :data:`ALTERNATION_BLOCKS` blocks of :data:`ALTERNATION_ROWS` rows spread over
+    ``y``: the even rows' mean minus the odd rows', in standard errors from each half's rms of
+    successive differences (whose slow components cancel, as they do between the halves), and
+    the ratio of those rms.  A tone at exactly half the sample rate alternates too: the
+    caller warns, it does not refuse."""
+    blocks = len(y) // ALTERNATION_ROWS
+    if blocks == 0:
+        return None
+    starts = np.linspace(0, len(y) - ALTERNATION_ROWS, min(blocks, ALTERNATION_BLOCKS))
+    rows = y[starts.astype(np.int64)[:, None] + np.arange(ALTERNATION_ROWS)]
+    even, odd = rows[:, 0::2], rows[:, 1::2]
+    with np.errstate(all="ignore"):  # blocks without noise, with NaN or huge values: left out
+        noise = np.stack([np.diff(even, axis=1).std(axis=1), np.diff(odd, axis=1).std(axis=1)])
+        stderr = np.sqrt((noise**2).sum(axis=0) / ALTERNATION_ROWS)  # var of a diff: 2 σ²
+        z = np.abs(even.mean(axis=1) - odd.mean(axis=1)) / stderr
+        ratio = noise.max(axis=0) / noise.min(axis=0)
+    usable = np.isfinite(z) & np.isfinite(ratio)
+    if not usable.any():
+        return None
+    z, ratio = float(np.median(z[usable])), float(np.median(ratio[usable]))
+    if not (z > ALTERNATION_Z or ratio > ALTERNATION_RATIO):
+        return None
+    return f"means {z:.3g} standard errors apart, noise {ratio:.3g}× apart"
+
+
 def unanalysable(y: np.ndarray) -> str | None:
     """Why an axis holds no noise the Allan variance can analyse (None when it can): 0 throughout
     (a field the sensor does not measure), constant (stuck), beyond :data:`FLOAT_RANGE` (values
@@ -256,7 +297,7 @@ def unanalysable(y: np.ndarray) -> str | None:
     repeating every 2 samples (a 1-LSB channel alternating 0/1: its Allan variance is exactly 0
     at every even m)."""
     lo, hi = float(y.min()), float(y.max())
-    if lo == hi == 0.0:  # sensor_msgs/Imu: REP 145 marks a field not measured by covariance -1
+    if lo == hi == 0.0:  # a field not measured, published as 0 (not marked: io.decode.NO_ESTIMATE)
         return "is 0 in every sample over the segment (not measured by this sensor?)"
     if lo == hi:
         return "is constant over the segment (stuck channel?)"
