@@ -10,7 +10,13 @@ import numpy as np
 import polars as pl
 import pytest
 
-from imupipe.analysis.condition import condition, fill_runs, unanalysable, window_rows
+from imupipe.analysis.condition import (
+    condition,
+    fill_runs,
+    two_sensors,
+    unanalysable,
+    window_rows,
+)
 from imupipe.errors import ImupipeError
 from imupipe.io.decode import ImuRecording
 from imupipe.vocab import AXES
@@ -601,3 +607,29 @@ def test_a_window_is_conditioned_like_the_same_frames_alone() -> None:
 def test_a_window_without_two_frames_or_not_finite_is_an_error(start, end, says) -> None:
     with pytest.raises(ImupipeError, match=re.escape(says)):
         condition(recording(), "auto", start, end)
+
+
+def test_two_sensors_are_told_by_the_bias_or_the_noise_of_alternate_rows() -> None:
+    """Rows alternating between two sensors: biases 0.05 apart on noise of 1 (means 1.6
+    standard errors apart in a block of 4096: one sensor), 1 apart (32: two), or noise 1.6×
+    apart; one sensor's white and random-walk rows read alike; under a block of rows, or no
+    noise in any block, nothing is said."""
+    rng = np.random.default_rng(8)
+    n = 16 * 4096
+
+    def interleaved(bias: float, noise: float) -> np.ndarray:
+        y = rng.standard_normal(n)
+        y[1::2] = bias + noise * y[1::2]
+        return y
+
+    assert two_sensors(interleaved(0.05, 1.0)) is None
+    assert (
+        two_sensors(interleaved(1.0, 1.0)) == "means 31.7 standard errors apart, noise 1.01× apart"
+    )
+    assert (
+        two_sensors(interleaved(0.0, 1.6)) == "means 0.51 standard errors apart, noise 1.61× apart"
+    )
+    assert two_sensors(rng.standard_normal(n)) is None
+    assert two_sensors(np.cumsum(rng.standard_normal(n))) is None  # slow parts cancel
+    assert two_sensors(interleaved(1.0, 1.0)[:4095]) is None
+    assert two_sensors(np.repeat([0.0, 1.0], n // 2)) is None  # no noise: no block to compare
