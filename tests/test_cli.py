@@ -207,3 +207,24 @@ def test_fleet_passes_the_time_window_to_every_unit(tmp_path: Path, cli, monkeyp
                         "--start", "600", "--end", "-300"])  # fmt: skip
     assert code == 2 and "stop here" in err
     assert (seen["options"].start_s, seen["options"].end_s) == (600.0, -300.0)
+
+
+def test_record_says_what_it_wrote(tmp_path: Path, capsys) -> None:
+    """``imupipe record`` ends with one line: the file, its frames, duration, rate, rate method
+    and size in MB."""
+    from imupipe.cli import main
+
+    path = tmp_path / "run.mcap"
+    old = sys.argv
+    sys.argv = ["imupipe", "record", "-o", str(path), "--duration", "3s", "--rate", "100"]
+    try:
+        with pytest.raises(SystemExit) as exit_info:
+            main()
+    finally:
+        sys.argv = old
+    out = capsys.readouterr()
+    assert exit_info.value.code in (0, None)
+    size_mb = path.stat().st_size / 1e6
+    assert (
+        f"{path}: 300 frames, 3.0 s at 100 Hz (host_poll), {size_mb:.1f} MB\n" in out.out + out.err
+    )
