@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import imupipe
@@ -284,3 +285,60 @@ def test_the_child_is_told_where_the_note_would_be(tmp_path: Path) -> None:
     )
     assert ahead.child_command(False)[-1].endswith("compile_late_kernels(False, None)")
     assert ahead.child_command(True)[-1].endswith("compile_late_kernels(True, None)")
+
+
+COMPLETE = r"""
+import json, sys
+import numpy as np
+from numba.core.registry import CPUDispatcher
+import imupipe
+from imupipe.analysis.analyze import compile_kernels, decoding_kernel
+
+def signatures():  # the decoders' kernels run before: compile_kernels is for the stages after
+    return {
+        f"{d.py_func.__module__}.{d.py_func.__qualname__}": sorted(map(str, d.signatures))
+        for m in list(sys.modules.values()) if m.__name__.startswith("imupipe")
+        for d in vars(m).values() if isinstance(d, CPUDispatcher) and not decoding_kernel(d)
+    }
+
+compile_kernels()
+before = signatures()
+imupipe.analyze(sys.argv[1], out=sys.argv[2], rrd=False, figures=False)
+after = signatures()
+print(json.dumps({k: v for k, v in after.items() if v != before.get(k, [])}))
+"""
+
+
+def test_compile_kernels_leaves_nothing_for_a_long_gapped_analysis_to_compile(
+    tmp_path: Path,
+) -> None:
+    """What the low-memory path and the benchmarks load before analysing
+    (:func:`imupipe.analysis.analyze.compile_kernels`) is every kernel, with every type, that
+    an analysis calls from Python: here of 6 min at 1 kHz (the noise identification's window of
+    averages, the long-record statistics) with a masked gap (the gap-tolerant sums)."""
+    from imupipe.io.mcap_bulk import BulkWriter
+    from imupipe.testing.ros_cdr import imu_payloads
+
+    n = 360_000
+    rng = np.random.default_rng(3)
+    stamps = 1_700_000_000_000_000_000 + np.arange(n, dtype=np.int64) * 1_000_000
+    keep = np.ones(n, dtype=bool)
+    keep[200_000:200_050] = False
+    path = tmp_path / "f.mcap"
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        cid = w.register_channel(
+            "/imu", "cdr", w.register_schema("sensor_msgs/msg/Imu", "ros2msg", b"")
+        )
+        for a in range(0, n, 1 << 16):
+            part = np.flatnonzero(keep[a : a + (1 << 16)]) + a
+            gyro = rng.normal(0, 1e-3, (part.size, 3))
+            accel = rng.normal(0, 1e-2, (part.size, 3)) + np.array([0.0, 0.0, 9.81])
+            w.write_chunk(cid, stamps[part], imu_payloads(stamps[part], gyro, accel))
+        w.finish()
+    done = subprocess.run(
+        [sys.executable, "-c", COMPLETE, str(path), str(tmp_path / "out")],
+        capture_output=True, text=True, timeout=900, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert json.loads(done.stdout.splitlines()[-1]) == {}
