@@ -54,6 +54,8 @@ def test_readme_example_records_and_analyses(tmp_path: Path) -> None:
     assert written["axes"]["gyro_x"]["ieee952"]["random_walk"]["value"] == n.value
     # by default the whole recording, from its first frame
     assert written["input"]["window_s"] == [0.0, None] and written["input"]["frames"] == 9000
+    # the curve is published up to T/4 (22.5 s; the fit reads it to T/2)
+    assert result.axes["gyro_x"].curve.tau_s[-1] == pytest.approx(19.95, abs=0.01)
     assert n.unit == "rad/s/sqrt(Hz)"
     # the paper's N of 0.05 °/√s is 8.73e-4 rad/s/√Hz; 90 s gives it within ~10 %
     assert n.value == pytest.approx(0.05 * 3.141592653589793 / 180, rel=0.1)

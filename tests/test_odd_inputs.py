@@ -706,7 +706,7 @@ def test_mean_and_rms_are_the_received_frames_whatever_masks_the_rest(
 ) -> None:
     """1 % of the messages lost one by one (short holes, bridged at long tau) and 50 in a row
     (a gap, masked): each axis' mean and rms are those of the frames received, not of the
-    grid's fill; the published curve stops at T/4."""
+    grid's fill."""
     stamps, gyro, accel = imu_stream()
     keep = np.random.default_rng(4).random(N) > 0.01
     keep[6000:6050] = False
@@ -718,8 +718,6 @@ def test_mean_and_rms_are_the_received_frames_whatever_masks_the_rest(
         values = (gyro if k < 3 else accel)[keep, k % 3]
         assert report["axes"][axis]["mean"] == pytest.approx(values.mean(), rel=1e-9, abs=1e-15)
         assert report["axes"][axis]["rms"] == pytest.approx(values.std(), rel=1e-9)
-        tau = report["axes"][axis]["allan"]["tau_s"]
-        assert tau[-1] <= N * 0.01 / 4 < tau[-1] * 10 ** (1 / 10) * 1.01  # the last before T/4
 
 
 @pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
