@@ -228,3 +228,33 @@ def test_record_says_what_it_wrote(tmp_path: Path, capsys) -> None:
     assert (
         f"{path}: 300 frames, 3.0 s at 100 Hz (host_poll), {size_mb:.1f} MB\n" in out.out + out.err
     )
+
+
+def test_demo_records_and_analyses_into_its_folder(tmp_path: Path, capsys) -> None:
+    """``imupipe demo`` (the README's main job, here 2 min instead of 12 h): the recording,
+    the simulator's truth and the reports in the folder, and the paper's table printed beside
+    the measured one."""
+    from imupipe.cli import main
+
+    out = tmp_path / "demo"
+    old = sys.argv
+    sys.argv = ["imupipe", "demo", "--out", str(out), "--duration", "2m"]
+    try:
+        with pytest.raises(SystemExit) as exit_info:
+            main()
+    finally:
+        sys.argv = old
+    printed = capsys.readouterr().out
+    assert exit_info.value.code in (0, None)
+    report = json.loads((out / "adis16364.imupipe" / "report.json").read_text())
+    assert report["input"]["frames"] == 12_000
+    assert report["input"]["path"] == str(out / "adis16364.mcap")
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["noise"]["gyro_x"]["paper_units"]["random_walk"] == 0.05
+    assert f"{out / 'adis16364.mcap'}: 12000 frames, 120.0 s at 100 Hz" in printed
+    assert f"reports written to {out / 'adis16364.imupipe'}/" in printed
+    assert (
+        "quantity            axis     measured [95 % interval]    paper   datasheet  unit"
+        in printed
+    )
+    assert "\nBias (mean)         accel_z  " in printed and "  -998.6  —          mg\n" in printed
