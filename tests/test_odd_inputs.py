@@ -379,6 +379,18 @@ def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> 
     for topic in streams:
         report = json.loads((tmp_path / "out" / topic_folder(topic) / "report.json").read_text())
         assert report["input"]["topic"] == topic and report["input"]["frames"] == 3000
+    # a third topic too short to analyse: the others' reports, then one line and exit 2
+    (tmp_path / "three").mkdir()
+    three = write_imu_topics(
+        tmp_path / "three" / "f.mcap", {**streams, "/imu2/data": imu_stream(10, seed=2)}
+    )
+    code, _, err = analyze(three, capsys, "--topic", "all")
+    assert code == 2
+    assert err.endswith("imupipe: error: 1 of 3 IMU topics could not be analysed: /imu2/data\n")
+    assert "warning: topic /imu2/data: " in err and "segment has 10 frames, too few" in err
+    for topic in streams:
+        folder = tmp_path / "three" / "out" / topic_folder(topic)
+        assert json.loads((folder / "report.json").read_text())["input"]["frames"] == 3000
 
 
 def run_info(path: Path, cli) -> str:
