@@ -225,6 +225,7 @@ def test_record_says_what_it_wrote(tmp_path: Path, capsys) -> None:
     out = capsys.readouterr()
     assert exit_info.value.code in (0, None)
     size_mb = path.stat().st_size / 1e6
+    assert "live view" not in out.out + out.err  # said only with --serve
     assert (
         f"{path}: 300 frames, 3.0 s at 100 Hz (host_poll), {size_mb:.1f} MB\n" in out.out + out.err
     )
