@@ -209,44 +209,24 @@ def test_fleet_passes_the_time_window_to_every_unit(tmp_path: Path, cli, monkeyp
     assert (seen["options"].start_s, seen["options"].end_s) == (600.0, -300.0)
 
 
-def test_record_says_what_it_wrote(tmp_path: Path, capsys) -> None:
+def test_record_says_what_it_wrote(tmp_path: Path, cli) -> None:
     """``imupipe record`` ends with one line: the file, its frames, duration, rate, rate method
     and size in MB."""
-    from imupipe.cli import main
-
     path = tmp_path / "run.mcap"
-    old = sys.argv
-    sys.argv = ["imupipe", "record", "-o", str(path), "--duration", "3s", "--rate", "100"]
-    try:
-        with pytest.raises(SystemExit) as exit_info:
-            main()
-    finally:
-        sys.argv = old
-    out = capsys.readouterr()
-    assert exit_info.value.code in (0, None)
+    code, out, err = cli(["record", "-o", str(path), "--duration", "3s", "--rate", "100"])
+    assert code in (0, None)
     size_mb = path.stat().st_size / 1e6
-    assert "live view" not in out.out + out.err  # said only with --serve
-    assert (
-        f"{path}: 300 frames, 3.0 s at 100 Hz (host_poll), {size_mb:.1f} MB\n" in out.out + out.err
-    )
+    assert "live view" not in out + err  # said only with --serve
+    assert f"{path}: 300 frames, 3.0 s at 100 Hz (host_poll), {size_mb:.1f} MB\n" in out + err
 
 
-def test_demo_records_and_analyses_into_its_folder(tmp_path: Path, capsys) -> None:
+def test_demo_records_and_analyses_into_its_folder(tmp_path: Path, cli) -> None:
     """``imupipe demo`` (the README's main job, here 2 min instead of 12 h): the recording,
     the simulator's truth and the reports in the folder, and the paper's table printed beside
     the measured one."""
-    from imupipe.cli import main
-
     out = tmp_path / "demo"
-    old = sys.argv
-    sys.argv = ["imupipe", "demo", "--out", str(out), "--duration", "2m"]
-    try:
-        with pytest.raises(SystemExit) as exit_info:
-            main()
-    finally:
-        sys.argv = old
-    printed = capsys.readouterr().out
-    assert exit_info.value.code in (0, None)
+    code, printed, _ = cli(["demo", "--out", str(out), "--duration", "2m"])
+    assert code in (0, None)
     report = json.loads((out / "adis16364.imupipe" / "report.json").read_text())
     assert report["input"]["frames"] == 12_000
     assert report["input"]["path"] == str(out / "adis16364.mcap")

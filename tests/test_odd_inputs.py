@@ -74,14 +74,20 @@ def imu_stream(n: int = N, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def write_imu_topics(
-    path: Path, streams: dict[str, tuple[np.ndarray, ...]], no_estimate=(False, False)
+    path: Path,
+    streams: dict[str, tuple[np.ndarray, ...]],
+    no_estimate=(False, False),
+    log_ns: np.ndarray | None = None,
 ) -> Path:
+    """Imu topics of (header stamps ns, gyro, accel), logged at ``log_ns`` (default: the
+    stamps)."""
     with open(path, "wb") as f:
         w = BulkWriter(f, profile="ros2")
         sid = w.register_schema(IMU_SCHEMA, "ros2msg", b"")
         for topic, (stamps, gyro, accel) in streams.items():
             cid = w.register_channel(topic, "cdr", sid)
-            w.write_chunk(cid, stamps, imu_payloads(stamps, gyro, accel, no_estimate=no_estimate))
+            payloads = imu_payloads(stamps, gyro, accel, no_estimate=no_estimate)
+            w.write_chunk(cid, stamps if log_ns is None else log_ns, payloads)
         w.finish()
     return path
 
@@ -626,16 +632,6 @@ def test_gyros_marked_no_estimate_are_left_out_as_the_message_says(tmp_path: Pat
     assert set(report["axes"]) == {"accel_x", "accel_y", "accel_z"}
 
 
-def write_imu_stamped(path: Path, header_ns: np.ndarray, log_ns: np.ndarray, gyro, accel) -> Path:
-    """One Imu topic whose header stamps and MCAP log times differ."""
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        w.write_chunk(cid, log_ns, imu_payloads(header_ns, gyro, accel))
-        w.finish()
-    return path
-
-
 @pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
 def test_a_reset_of_the_stamping_clock_is_placed_by_the_log_time(
     tmp_path: Path, capsys, budget: list[str]
@@ -656,9 +652,11 @@ def test_a_reset_of_the_stamping_clock_is_placed_by_the_log_time(
     )
     for folder in ("reset", "never"):
         (tmp_path / folder).mkdir()
-    reset = write_imu_stamped(tmp_path / "reset" / "f.mcap", header_ns, log_ns, gyro, accel)
-    never = write_imu_stamped(
-        tmp_path / "never" / "f.mcap", stamps[0] + true_ns, log_ns, gyro, accel
+    reset = write_imu_topics(
+        tmp_path / "reset" / "f.mcap", {"/imu": (header_ns, gyro, accel)}, log_ns=log_ns
+    )
+    never = write_imu_topics(
+        tmp_path / "never" / "f.mcap", {"/imu": (stamps[0] + true_ns, gyro, accel)}, log_ns=log_ns
     )
     code, report, err = analyze(reset, capsys, *budget)
     assert code == 0, err
