@@ -225,6 +225,7 @@ def test_demo_records_and_analyses_into_its_folder(tmp_path: Path, cli) -> None:
     the simulator's truth and the reports in the folder, and the paper's table printed beside
     the measured one."""
     out = tmp_path / "demo"
+    out.mkdir()  # a folder the user made first
     code, printed, _ = cli(["demo", "--out", str(out), "--duration", "2m"])
     assert code in (0, None)
     report = json.loads((out / "adis16364.imupipe" / "report.json").read_text())
@@ -239,3 +240,24 @@ def test_demo_records_and_analyses_into_its_folder(tmp_path: Path, cli) -> None:
         in printed
     )
     assert "\nBias (mean)         accel_z  " in printed and "  -998.6  —          mg\n" in printed
+
+
+EXITS_SCRIPT = """
+import sys
+import imupipe.cli as cli
+code = {"none": None, "text": "the message"}[sys.argv[1]]
+def main():
+    sys.exit(code)
+cli.main = main
+cli.console()
+"""
+
+
+@pytest.mark.parametrize(("how", "status", "said"), [("none", 0, ""), ("text", 1, "the message\n")])
+def test_console_exit_status_of_no_code_and_of_a_message(how: str, status: int, said: str) -> None:
+    """``sys.exit()`` ends the command with status 0; ``sys.exit("text")`` prints the text
+    on stderr and ends with status 1, as the interpreter would."""
+    proc = subprocess.run(
+        [sys.executable, "-c", EXITS_SCRIPT, how], capture_output=True, text=True, timeout=120
+    )
+    assert (proc.returncode, proc.stderr) == (status, said)
