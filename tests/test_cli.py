@@ -209,6 +209,37 @@ def test_fleet_passes_the_time_window_to_every_unit(tmp_path: Path, cli, monkeyp
     assert (seen["options"].start_s, seen["options"].end_s) == (600.0, -300.0)
 
 
+def test_fleet_defaults_and_a_failed_unit(tmp_path: Path, cli, monkeypatch) -> None:
+    """Without options every unit is analysed whole under a 2 GB budget; a failed unit is a
+    warning naming it, and the fleet ends with one line and exit 2 (a fleet without failures
+    exits 0)."""
+    import imupipe.fleet.run as fleet_run
+    from imupipe.fleet.task import UnitOutcome
+
+    seen = {}
+    bad = UnitOutcome("u2", "u2.mcap", "failed", "u2.mcap: not MCAP", None, None, 1.0, "")
+    good = UnitOutcome("u1", "u1.mcap", "ok", None, None, None, 1.0, "")
+
+    def stand_in(recordings, out, **kw):
+        seen.update(kw)
+        units = [good, bad] if seen.get("fail") else [good]
+        return fleet_run.FleetResult(units, [], {}, Path(out), 3.0)
+
+    monkeypatch.setattr(fleet_run, "run_fleet", stand_in)
+    code, out, err = cli(["fleet", str(tmp_path), "--out", str(tmp_path / "f")])
+    options = seen["options"]
+    assert code in (0, None) and err == ""
+    assert (options.start_s, options.end_s, options.memory_budget_bytes) == (0.0, None, 2 * 10**9)
+    assert f"1 of 1 recordings analysed in 3.0 s; fleet report in {tmp_path / 'f'}/fleet.md" in out
+    seen["fail"] = True
+    code, out, err = cli(["fleet", str(tmp_path), "--out", str(tmp_path / "f")])
+    assert code == 2
+    assert err == (
+        "warning: u2: u2.mcap: not MCAP\n"
+        f"imupipe: error: 1 of 2 recordings failed (listed in {tmp_path / 'f'}/fleet.md)\n"
+    )
+
+
 def test_record_says_what_it_wrote(tmp_path: Path, cli) -> None:
     """``imupipe record`` ends with one line: the file, its frames, duration, rate, rate method
     and size in MB."""
