@@ -230,6 +230,7 @@ def test_fleet_defaults_and_a_failed_unit(tmp_path: Path, cli, monkeypatch) -> N
     options = seen["options"]
     assert code in (0, None) and err == ""
     assert (options.start_s, options.end_s, options.memory_budget_bytes) == (0.0, None, 2 * 10**9)
+    assert (options.taus_per_decade, options.loop, options.rrd) == (10, True, True)
     assert f"1 of 1 recordings analysed in 3.0 s; fleet report in {tmp_path / 'f'}/fleet.md" in out
     seen["fail"] = True
     code, out, err = cli(["fleet", str(tmp_path), "--out", str(tmp_path / "f")])
