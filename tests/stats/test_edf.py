@@ -215,3 +215,25 @@ def test_the_window_decides_a_white_record_as_every_average_does(monkeypatch) ->
     monkeypatch.setattr(edf, "_acf_ids", recording)
     assert noise_ids(x, m, window=True).tolist() == expected == [0] * 5
     assert set(read_whole) == {4, 8}  # (each thread is given them all)
+
+
+def test_ten_averages_are_identified_by_b1_and_nine_keep_the_previous_type() -> None:
+    """B1_MIN_POINTS: a factor leaving 10 averages is identified by the B1 ratio (here a
+    strongly red series: -2); with 9 the previous factor's type is kept (none: 0)."""
+    y = np.cumsum(np.cumsum(np.random.default_rng(0).standard_normal(100)))
+    x = np.concatenate([[0.0], np.cumsum(y)])
+    assert noise_ids(x, np.array([10])).tolist() == [-2]
+    assert noise_ids(x[:91], np.array([10])).tolist() == [0]
+
+
+def test_a_series_one_average_longer_than_the_window_is_read_from_its_start(
+    monkeypatch,
+) -> None:
+    """ACF_WINDOW + 1 averages: the centred window starts at the first average (and ends one
+    before the last): its type is the window's, on white noise the full series' too."""
+    monkeypatch.setattr(edf, "ACF_WINDOW", 4096)
+    y = np.random.default_rng(2).standard_normal(4097)
+    x = np.concatenate([[0.0], np.cumsum(y)])
+    p_window = edf._acf_power(np.diff(x[:4097]), 1, False, 4096, 2)
+    assert abs(p_window % 1.0 - 0.5) > edf.ACF_WINDOW_MARGIN
+    assert noise_ids(x, np.array([1]), window=True).tolist() == [int(np.rint(p_window))] == [0]
