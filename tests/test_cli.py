@@ -142,6 +142,8 @@ def test_good_recording_exits_0_with_reports(runs, workdir: Path) -> None:
     out = workdir / "good"
     report = json.loads((out / "report.json").read_text())
     assert report["input"]["frames"] == 6000 and report["input"]["warnings"] == []
+    taus = report["axes"]["gyro_x"]["allan"]["tau_s"]  # 10 a decade, 0.01 s to T/4 = 15 s
+    assert (len(taus), taus[:3], taus[-1]) == (32, [0.01, 0.02, 0.03], 12.59)
     for name in ("report.md", "allan.parquet", "imu.yaml"):
         assert (out / name).is_file()
     assert not (out / "recording.rrd").exists()  # --no-rrd
@@ -245,11 +247,12 @@ def test_record_says_what_it_wrote(tmp_path: Path, cli) -> None:
     """``imupipe record`` ends with one line: the file, its frames, duration, rate, rate method
     and size in MB."""
     path = tmp_path / "run.mcap"
-    code, out, err = cli(["record", "-o", str(path), "--duration", "3s", "--rate", "100"])
+    code, out, err = cli(["record", "-o", str(path), "--duration", "60s", "--rate", "100"])
     assert code in (0, None)
     size_mb = path.stat().st_size / 1e6
+    assert 0.1 < size_mb < 1  # shown to 0.1 MB
     assert "live view" not in out + err  # said only with --serve
-    assert f"{path}: 300 frames, 3.0 s at 100 Hz (host_poll), {size_mb:.1f} MB\n" in out + err
+    assert f"{path}: 6000 frames, 60.0 s at 100 Hz (host_poll), {size_mb:.1f} MB\n" in out + err
 
 
 def test_demo_records_and_analyses_into_its_folder(tmp_path: Path, cli) -> None:
