@@ -241,6 +241,12 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/analysis/test_events.py",  # the first pass' events, excised beside the gaps
     ),
     "pipeline/cli.py": ("tests/test_cli.py", "tests/test_odd_inputs.py", "tests/test_hostile.py"),
+    "pipeline/api.py": (
+        "tests/test_api.py",
+        "tests/test_cli.py",
+        "tests/recording/test_recorder_chunks.py",
+        "tests/report/test_outputs.py",
+    ),
 }
 
 
