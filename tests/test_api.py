@@ -91,3 +91,27 @@ def test_subpackage_exports_resolve_and_shadow_no_module(name: str) -> None:
     for module in modules:  # a submodule stays reachable as an attribute after the imports
         assert importlib.import_module(f"imupipe.{name}.{module}").__name__.endswith(module)
         assert type(getattr(package, module)).__name__ == "module"
+
+
+def test_the_readme_calls_by_keyword_work(tmp_path: Path) -> None:
+    """As the README calls them: ``out=`` and the options by keyword (``path=`` too)."""
+    summary = imupipe.record(path=tmp_path / "k.mcap", duration="20s", seed=1)
+    assert summary.frames == 2000
+    result = imupipe.analyze(
+        path=tmp_path / "k.mcap", out=tmp_path / "k_out", rrd=False, figures=False, loop=False
+    )
+    assert (tmp_path / "k_out" / "report.json").is_file() and result.input.frames == 2000
+
+
+def test_the_default_output_folder_of_every_kind_of_name(tmp_path: Path, monkeypatch) -> None:
+    """``run.mcap`` → ``run.imupipe`` (relative stays relative); any other name keeps its
+    suffix (``bag.v2`` → ``bag.v2.imupipe``); ``.`` and ``..`` are their folders' names."""
+    from imupipe.api import default_out_dir
+
+    here = tmp_path / "a" / "b"
+    here.mkdir(parents=True)
+    monkeypatch.chdir(here)
+    assert default_out_dir("run.mcap") == Path("run.imupipe")
+    assert default_out_dir("bag.v2") == Path("bag.v2.imupipe")
+    assert default_out_dir(".") == tmp_path.resolve() / "a" / "b.imupipe"
+    assert default_out_dir("..") == tmp_path.resolve() / "a.imupipe"
