@@ -165,11 +165,12 @@ def interleaved_warning(
     (with two frame ids they are told apart: :func:`check_frames`)."""
     if rec.frames["counter"].null_count() == 0:  # a device's frames, counted
         return []
-    found = {}
-    for name in AXES:
-        y = None if name in series.absent_axes else source.column(name, series.rows)
-        if y is not None and (why := two_sensors(y)):
-            found[name] = why
+    found = {
+        name: why
+        for name in AXES
+        if name not in series.absent_axes
+        and (why := two_sensors(source.column(name, series.rows)))  # (axes are never null)
+    }
     if not found:
         return []
     return [

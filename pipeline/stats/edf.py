@@ -333,7 +333,7 @@ def noise_ids(
     acf = np.empty(acf_m.size, dtype=np.int64)
     full = np.ones(acf_m.size, dtype=bool)
     if window:
-        long = np.flatnonzero((x.size - 1) // acf_m > ACF_WINDOW)
+        long = np.flatnonzero(points[points >= ACF_MIN_POINTS] > ACF_WINDOW)
         ids, decided = _window_ids(x, acf_m[long])
         acf[long[decided]], full[long[decided]] = ids[decided], False
     rest_m, rest = acf_m[full], np.empty(int(full.sum()), dtype=np.int64)
