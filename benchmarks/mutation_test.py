@@ -247,6 +247,23 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/recording/test_recorder_chunks.py",
         "tests/report/test_outputs.py",
     ),
+    "pipeline/fleet/report.py": (
+        "tests/fleet/test_fleet_population.py",
+        "tests/fleet/test_fleet_cluster.py",
+    ),
+    "pipeline/fleet/task.py": (
+        "tests/fleet/test_fleet_population.py",
+        "tests/analysis/test_workers.py",
+        "tests/fleet/test_fleet_cluster.py",
+    ),
+    "pipeline/fleet/run.py": (
+        "tests/fleet/test_fleet_population.py",
+        "tests/test_cli.py",
+        "tests/fleet/test_fleet_cluster.py",
+    ),
+    "pipeline/fleet/figure_plan.py": ("tests/fleet/test_fleet_population.py",),
+    "pipeline/analysis/workers.py": ("tests/analysis/test_workers.py", "tests/test_api.py"),
+    "pipeline/recording/spi.py": ("tests/recording/test_spi.py",),
 }
 
 
