@@ -299,6 +299,12 @@ class _Steps:
 
 
 _TIMES = ("stamp_ns", "log_time_ns")
+_BASE_COLUMNS = {
+    "stamp_ns": frozenset({"stamp_ns"}),
+    "log_time_ns": frozenset({"log_time_ns"}),
+    "placed_stamp_ns": frozenset(_TIMES),
+}
+"""The raw columns each time base is made of (:meth:`ScannedRecording._time_base`)."""
 
 
 class _Columns:
@@ -397,8 +403,9 @@ def _decode_imu(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) 
     """Decode the fields of Imu messages that ``columns`` needs (None: all of them).
 
     A subset keeps the stamps only for ``t_s`` / ``stamp_ns`` / ``temp_c`` (interpolated on the
-    stamps), each axis only when named, and ``nonfinite`` (which axes are NaN/inf,
-    :func:`nonfinite_bits`: 1 byte per frame) instead of the axes for conditioning.  A vector
+    time base) and the log time for ``t_s`` / ``temp_c``, each axis only when named, and
+    ``nonfinite`` (which axes are NaN/inf, :func:`nonfinite_bits`: 1 byte per frame) instead of
+    the axes for conditioning.  A vector
     whose covariance's element 0 is :data:`NO_ESTIMATE` is read as NaN (counted in
     ``out.no_estimate``)."""
     every = columns is None
@@ -411,7 +418,7 @@ def _decode_imu(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) 
     axes = [vectors[:, i // 3, i % 3] for i in range(len(AXES))]  # views into the rows
     if every or columns & {"t_s", "stamp_ns", "temp_c"}:
         out.add(stamp_ns=m.stamps())
-    if every or "t_s" in columns:
+    if every or columns & {"t_s", "temp_c"}:  # (both choose the time base)
         out.add(log_time_ns=m.log_time)
     if not every and "nonfinite" in columns:
         out.add(nonfinite=nonfinite_bits(axes, len(m)))
@@ -421,7 +428,8 @@ def _decode_imu(m: _CdrMessages, out: _Columns, columns: frozenset[str] | None) 
 
 
 def _decode_temperature(m: _CdrMessages, out: _Columns) -> None:
-    out.add(stamp_ns=m.stamps(), temp_c=m.f64(0, 1)[:, 0])
+    """Both time bases are kept: the temperature is placed on the IMU's (:func:`_temperature`)."""
+    out.add(stamp_ns=m.stamps(), log_time_ns=m.log_time, temp_c=m.f64(0, 1)[:, 0])
 
 
 def _adis_frame(
@@ -467,36 +475,29 @@ def _map_chunks(
 
 def _imu_frame(
     cols: dict[str, np.ndarray],
-    temp: dict[str, np.ndarray] | None,
+    temp_c: np.ndarray | None,
     n: int,
     columns: frozenset[str] | None = None,
 ) -> pl.DataFrame:
     """The decode contract's columns for an Imu channel, or only ``columns`` of them (plus
-    ``nonfinite`` when asked for; ``t_s`` is added by :func:`decode`), ``n`` rows.
+    ``nonfinite`` when asked for; ``t_s`` is added by :func:`decode`), ``n`` rows; ``temp_c``:
+    the temperature at each frame (:func:`_temperature`), None when there is none.
 
     Columns an Imu message does not carry are built as polars constants (an all-null Float64
-    ``supply_v`` is a validity bitmap of n/8 bytes, not an n × 8-byte NaN array); ``temp_c`` is
-    interpolated over the stamps into their own buffer when ``stamp_ns`` is not asked for.
-    Stamps not asked for leave ``cols`` (the caller's dict) as soon as they are used."""
-    keep_stamps = columns is None or "stamp_ns" in columns
-    if columns is not None and not columns & {"stamp_ns", "temp_c"}:
-        cols.pop("stamp_ns", None)  # only needed for t_s, already made: freed before the frame
-
-    def temp_c() -> pl.Series:
-        if temp is None or not len(temp["stamp_ns"]):
-            return pl.repeat(None, n, dtype=pl.Float64, eager=True)
-        order = np.argsort(temp["stamp_ns"], kind="stable")
-        xp, fp = temp["stamp_ns"][order].astype(np.float64), temp["temp_c"][order]
-        stamps = cols["stamp_ns"] if keep_stamps else cols.pop("stamp_ns")
-        out = np.empty(n) if keep_stamps else stamps.view(np.float64)
-        out = _map_chunks(stamps, lambda s: np.interp(s.astype(np.float64), xp, fp), out)
-        return pl.Series(out, nan_to_null=True)
+    ``supply_v`` is a validity bitmap of n/8 bytes, not an n × 8-byte NaN array).  Stamps not
+    asked for leave ``cols`` (the caller's dict) before the frame is built."""
+    if columns is not None and "stamp_ns" not in columns:
+        cols.pop("stamp_ns", None)  # only needed for t_s and temp_c, already made
 
     data = {name: cols[name] for name in AXES if columns is None or name in columns}
     makers = {
         "stamp_ns": lambda: cols["stamp_ns"],
         **{name: (lambda v=v: v) for name, v in data.items()},
-        "temp_c": temp_c,
+        "temp_c": lambda: (
+            pl.repeat(None, n, dtype=pl.Float64, eager=True)
+            if temp_c is None
+            else pl.Series(temp_c, nan_to_null=True)
+        ),
         "supply_v": lambda: pl.repeat(None, n, dtype=pl.Float64, eager=True),
         "counter": lambda: pl.repeat(None, n, dtype=pl.UInt32, eager=True),
         "flag_nd": lambda: pl.repeat(True, n, dtype=pl.Boolean, eager=True),
@@ -579,6 +580,13 @@ def _uses_log_time(steps: dict[str, _Steps], warnings: list[str]) -> bool:
     return False
 
 
+def _placed(steps: dict[str, _Steps]) -> bool:
+    """Whether header stamps are placed by the log time (:func:`_placed_after_resets`): their
+    clock was reset 1 to :data:`MAX_CLOCK_RESETS` times and the log time never (a log time
+    copied from the stamps resets with them)."""
+    return 0 < steps["stamp_ns"].resets <= MAX_CLOCK_RESETS and steps["log_time_ns"].resets == 0
+
+
 def _placed_after_resets(stamps: np.ndarray, log: np.ndarray, warnings: list[str]) -> np.ndarray:
     """The header ``stamps`` (ns) with each run after a clock reset (a step back by more than
     :data:`CLOCK_RESET_NS`) moved onto the first run's clock by the MCAP ``log`` time: by the
@@ -600,6 +608,38 @@ def _placed_after_resets(stamps: np.ndarray, log: np.ndarray, warnings: list[str
         "placed by the MCAP log time"
     )
     return out
+
+
+def _temperature(
+    temperature: _Columns, base: str, x: np.ndarray, out: np.ndarray, warnings: list[str]
+) -> np.ndarray | None:
+    """The Temperature topic's °C at each IMU frame, written into ``out`` (f64, may be ``x``'s
+    own memory) and returned: linear interpolation at the frames' times ``x`` (ns, int64, on
+    the IMU's time base ``base``: see :meth:`ScannedRecording.recording`), the temperature's
+    messages on the same base (their log time; or their stamps, placed after their own clock
+    resets as the IMU's are), held before the first message and after the last.  None, with a
+    warning, when no message falls within the frames' span (a topic stamped by another clock)
+    or there is none."""
+    temp = temperature.concat()
+    if base == "log_time_ns":
+        at = temp["log_time_ns"]
+    elif base == "placed_stamp_ns" and _placed(temperature.steps):
+        at = _placed_after_resets(temp["stamp_ns"], temp["log_time_ns"], [])
+    else:
+        at = temp["stamp_ns"]
+    if not len(at):
+        return None
+    if not ((at >= x.min()) & (at <= x.max())).any():
+        warnings.append(
+            f"the temperature topic's {len(at)} message(s) are stamped outside the IMU's time "
+            f"span ({'log time' if base == 'log_time_ns' else 'header.stamp'}: another clock?): "
+            "the temperature is not used"
+        )
+        return None
+    order = np.argsort(at, kind="stable")
+    origin = x[0]  # times as f64 after it: ns exact, not to 256 ns as ~1.7e18 ns since 1970
+    xp, fp = (at[order] - origin).astype(np.float64), temp["temp_c"][order]
+    return _map_chunks(x, lambda s: np.interp((s - origin).astype(np.float64), xp, fp), out)
 
 
 def _seconds(cols: dict[str, np.ndarray], use_log: bool, keep_stamps: bool) -> np.ndarray:
@@ -665,20 +705,20 @@ class ScannedRecording:
         """Frames of the channel."""
         return self.channel.rows
 
-    def _raw(
-        self, columns: frozenset[str] | None, use_log: bool, placed: bool
-    ) -> frozenset[str] | None:
-        """The raw columns a spilled channel maps to build ``columns`` (None: all kept)."""
+    def _time_base(self, warnings: list[str]) -> str:
+        """What the frames are timed on: ``log_time_ns`` when the header stamps are unset or
+        broken (:func:`_uses_log_time`, whose warning is added), ``placed_stamp_ns`` after
+        clock resets (:func:`_placed`), else ``stamp_ns``."""
+        if _uses_log_time(self.channel.steps, warnings):
+            return "log_time_ns"
+        return "placed_stamp_ns" if _placed(self.channel.steps) else "stamp_ns"
+
+    def _raw(self, columns: frozenset[str] | None, base: str | None) -> frozenset[str] | None:
+        """The raw columns a spilled channel maps to build ``columns`` on the time ``base``
+        (None: all kept)."""
         if self.channel.spill is None or columns is None:
             return None
-        raw = set(columns)
-        if "t_s" in columns:
-            raw.add("log_time_ns" if use_log else "stamp_ns")
-        if placed:
-            raw |= {"log_time_ns", "stamp_ns"}
-        if self.kind == "imu" and "temp_c" in columns:
-            raw.add("stamp_ns")  # temperature is interpolated over the stamps
-        return frozenset(raw)
+        return frozenset(columns | (_BASE_COLUMNS[base] if base else frozenset()))
 
     def recording(self, columns: frozenset[str] | None = None) -> ImuRecording | None:
         """The frame of the decode contract, or of ``columns`` only (``nonfinite``:
@@ -693,29 +733,31 @@ class ScannedRecording:
                 "(the same stamp and values: recorded twice?): each is read once"
             )
         timed = columns is None or "t_s" in columns
-        use_log = timed and _uses_log_time(self.channel.steps, warnings)
-        steps = self.channel.steps
-        placed = timed and not use_log and 0 < steps["stamp_ns"].resets <= MAX_CLOCK_RESETS
-        placed &= steps["log_time_ns"].resets == 0  # (a log time copied from the stamps)
-        if (use_log or placed) and "log_time_ns" in self.channel.skip:
+        warm = self.temperature is not None and (columns is None or "temp_c" in columns)
+        noted = warnings if timed else []  # the time base's notes go with t_s
+        base = self._time_base(noted) if timed or warm else None
+        if base in ("log_time_ns", "placed_stamp_ns") and "log_time_ns" in self.channel.skip:
             return None
         n = self.rows
-        cols = self.channel.concat(self._raw(columns, use_log, placed))
-        if placed:
-            cols["placed_stamp_ns"] = _placed_after_resets(
-                cols["stamp_ns"], cols["log_time_ns"], warnings
-            )
+        cols = self.channel.concat(self._raw(columns, base))
+        if base == "placed_stamp_ns":
+            cols[base] = _placed_after_resets(cols["stamp_ns"], cols["log_time_ns"], noted)
+        temp_c = None
+        if warm and base is not None:
+            reuse = not timed and base not in columns  # (columns is not None when untimed)
+            x = cols.pop(base) if reuse else cols[base]
+            out = x.view(np.float64) if reuse else np.empty(n)
+            temp_c = _temperature(self.temperature, base, x, out, warnings)
         t_s, time_source = None, ""
         if timed:
-            keep_stamps = columns is None or not columns.isdisjoint({"stamp_ns", "temp_c"})
-            t_s = _seconds(cols, use_log, keep_stamps)
-            time_source = "log_time" if use_log else "header.stamp"
+            keep_stamps = columns is None or "stamp_ns" in columns
+            t_s = _seconds(cols, base == "log_time_ns", keep_stamps)
+            time_source = "log_time" if base == "log_time_ns" else "header.stamp"
         if self.device is not None:
             frames = _adis_frame(cols, self.device, n, columns)
             source = SCHEMA_NAME
         else:
-            temp = self.temperature.concat() if self.temperature is not None else None
-            frames = _imu_frame(cols, temp, n, columns)
+            frames = _imu_frame(cols, temp_c, n, columns)
             source = IMU_SCHEMA
         if t_s is not None:  # (a frame of no other column has no rows to broadcast t_s to)
             t_col = pl.Series("t_s", t_s)

@@ -120,20 +120,38 @@ def test_no_imu_topic_lists_topics(tmp_path: Path) -> None:
         decode(bag)
 
 
-def test_log_time_used_when_header_stamps_are_unset(tmp_path: Path) -> None:
+def temperature_msg(stamp_ns: int, celsius: float):
+    Temperature = TS.types["sensor_msgs/msg/Temperature"]
+    Header = TS.types["std_msgs/msg/Header"]
+    Time = TS.types["builtin_interfaces/msg/Time"]
+    stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+    header = Header(stamp=stamp, frame_id="imu")
+    return Temperature(header=header, temperature=celsius, variance=0.0)
+
+
+@pytest.mark.parametrize("keep_one", [False, True])
+def test_log_time_used_when_header_stamps_are_unset(tmp_path: Path, keep_one: bool) -> None:
+    """Stamps left at 0 by the IMU's driver and its temperature's: both are placed by the log
+    time (200 Hz; the temperature at 2 Hz rises 1 °C a second)."""
     bag = tmp_path / "bag"
     n = 200
     Imu = TS.types["sensor_msgs/msg/Imu"]
     with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conn = writer.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=TS)
+        tconn = writer.add_connection("/imu/temp", "sensor_msgs/msg/Temperature", typestore=TS)
         for i in range(n):
             msg = imu_msg(i, 0, np.zeros(3), np.zeros(3), "imu")
             assert isinstance(msg, Imu)
             writer.write(conn, T0 + i * 5_000_000, TS.serialize_cdr(msg, conn.msgtype))
-    rec = decode(bag)
+            if i % 100 == 0:
+                temp = temperature_msg(0, 20.0 + i * 0.005)
+                writer.write(tconn, T0 + i * 5_000_000, TS.serialize_cdr(temp, tconn.msgtype))
+    rec = decode(bag, keep_one_time_base=keep_one)
     assert rec.time_source == "log_time"
     assert any("header.stamp is unset" in w for w in rec.warnings)
     np.testing.assert_allclose(np.diff(rec.frames["t_s"].to_numpy()), 0.005)
+    expected = np.minimum(20.0 + np.arange(n) * 0.005, 20.5)  # held after the last message
+    np.testing.assert_allclose(rec.frames["temp_c"].to_numpy(), expected, rtol=0, atol=1e-9)
 
 
 def test_gaps_in_a_rosbags_bag_are_masked_not_cut(tmp_path: Path, analysed_with_two_gaps) -> None:
@@ -204,19 +222,47 @@ def test_runs_after_clock_resets_are_placed_by_the_log_time(tmp_path: Path, keep
     bag = tmp_path / "bag"
     with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=TS)
+        tconn = writer.add_connection("/imu/temp", "sensor_msgs/msg/Temperature", typestore=TS)
         for i in range(n):
             msg = imu_msg(i, int(header[i]), np.zeros(3), np.array([0, 0, 9.8]), "imu")
-            writer.write(
-                conn, T0 + int(true_ns[i]) + 3_000_000, TS.serialize_cdr(msg, conn.msgtype)
-            )
+            log = T0 + int(true_ns[i]) + 3_000_000
+            writer.write(conn, log, TS.serialize_cdr(msg, conn.msgtype))
+            if i % 50 == 0:  # 2 Hz on the same clock, 0.1 °C a second, received 1 ms later
+                temp = temperature_msg(int(header[i]), 30.0 + true_ns[i] / 1e10)
+                writer.write(tconn, log + 1_000_000, TS.serialize_cdr(temp, tconn.msgtype))
     rec = decode(bag, keep_one_time_base=keep_one)
     np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), header)
     np.testing.assert_allclose(rec.frames["t_s"].to_numpy(), true_ns / 1e9, rtol=0, atol=1e-9)
+    # each run's temperature where it was measured: the runs' own, in their own order
+    expected = 30.0 + np.minimum(true_ns, true_ns[850]) / 1e10  # held after the last message
+    np.testing.assert_allclose(rec.frames["temp_c"].to_numpy(), expected, rtol=0, atol=1e-9)
     assert rec.time_source == "header.stamp"
     assert rec.warnings == [
         "header.stamp jumps back 2 time(s) (by 41.99 s at message 300, …: the clock that stamps "
         "them was reset, e.g. a driver restarted with the sensor's clock): the messages after "
         "each jump are placed by the MCAP log time"
+    ]
+
+
+def test_a_temperature_stamped_by_another_clock_is_not_used(tmp_path: Path) -> None:
+    """The IMU stamped by the sensor's clock (seconds since its power-up), its temperature by
+    the host's: no temperature message falls within the IMU's stamps, so none is read as the
+    temperature of any frame (before: every frame got the last message's value)."""
+    bag = tmp_path / "bag"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=TS)
+        tconn = writer.add_connection("/imu/temp", "sensor_msgs/msg/Temperature", typestore=TS)
+        for i in range(300):
+            msg = imu_msg(i, 7_000_000_000 + i * 10_000_000, np.zeros(3), np.zeros(3), "imu")
+            writer.write(conn, T0 + i * 10_000_000, TS.serialize_cdr(msg, conn.msgtype))
+            if i % 100 == 0:
+                temp = temperature_msg(T0 + i * 10_000_000, 25.0 + i)
+                writer.write(tconn, T0 + i * 10_000_000, TS.serialize_cdr(temp, tconn.msgtype))
+    rec = decode(bag)
+    assert rec.frames["temp_c"].null_count() == 300
+    assert rec.warnings == [
+        "the temperature topic's 3 message(s) are stamped outside the IMU's time span "
+        "(header.stamp: another clock?): the temperature is not used"
     ]
 
 
