@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 from pathlib import Path
 
 import numba
@@ -111,6 +112,27 @@ def test_axes_at_once_obeys_workers_axes_and_memory(monkeypatch: pytest.MonkeyPa
     assert workers.axes_at_once(4, 6, 100, 299) == 3  # two more axes fit in 299 bytes
     assert workers.axes_at_once(4, 6, 100, 99) == 1
     assert workers.axes_at_once(4, 6, 100, -5_000) == 1  # over the budget already
+    assert workers.axes_at_once(4, 6, 1, 3) == 4  # axes of one byte: three more fit in 3
+    assert workers.axes_at_once(4, 6, 1, 0) == 1  # no byte to spare
+
+
+def test_a_failing_axis_leaves_the_axes_not_started_unrun() -> None:
+    """Two workers, six axes, the first failing at 50 ms while the others take 200 ms: the
+    error comes back and the three axes still waiting are never run (not analysed to be
+    thrown away: Ctrl-C or a failure returns without them)."""
+    started: list[int] = []
+
+    def axis(i: int) -> int:
+        started.append(i)
+        time.sleep(0.05 if i == 0 else 0.2)
+        if i == 0:
+            raise ImupipeError("gyro_x failed")
+        return i
+
+    with pytest.raises(ImupipeError, match="gyro_x failed"), workers.axis_pool(2) as run:
+        list(run(axis, range(6)))
+    assert sorted(started) == [0, 1, 2]
+    assert not axis_threads()
 
 
 def test_axis_concurrency_budgets_memory(
