@@ -680,6 +680,44 @@ def test_a_reset_of_the_stamping_clock_is_placed_by_the_log_time(
         assert n["value"] == pytest.approx(truth["value"], rel=1e-6)
 
 
+@pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
+def test_a_few_stray_stamps_cost_nothing(tmp_path: Path, capsys, budget: list[str]) -> None:
+    """One message stamped 0 (a field left unset once), one 5 s early and one 1 h late, among
+    12,000 at 100 Hz received with 0-3 ms of latency. Before session 40 the first and last
+    read as clock resets, then as steps back: more than half the grid masked, so only the
+    6000 frames before the first stray were analysed (the -5 s one alone: 1001 samples masked,
+    rate 100.28 Hz). Each stray now takes its neighbours' interpolated stamp: the same report
+    as the clean stamps'."""
+    stamps, gyro, accel = imu_stream()
+    rng = np.random.default_rng(8)
+    log_ns = np.maximum.accumulate(stamps + np.abs(rng.normal(0, 1e6, N)).astype(np.int64))
+    strayed = stamps.copy()
+    strayed[6000] = 0
+    strayed[8000] -= 5 * 10**9
+    strayed[10_000] += 3600 * 10**9
+    for folder in ("stray", "clean"):
+        (tmp_path / folder).mkdir()
+    stray = write_imu_topics(
+        tmp_path / "stray" / "f.mcap", {"/imu": (strayed, gyro, accel)}, log_ns=log_ns
+    )
+    clean = write_imu_topics(
+        tmp_path / "clean" / "f.mcap", {"/imu": (stamps, gyro, accel)}, log_ns=log_ns
+    )
+    code, report, err = analyze(stray, capsys, *budget)
+    assert code == 0, err
+    _, expected, _ = analyze(clean, capsys, *budget)
+    assert warnings_of(report).startswith(
+        "3 message(s) have a header.stamp more than 1 s off their neighbours' (message 6000 by "
+        "-1.7e+09 s, …): each is replaced by its neighbours' stamps, interpolated"
+    )
+    assert report["input"]["warnings"][1:] == expected["input"]["warnings"]
+    assert report["input"]["counts"] == expected["input"]["counts"]
+    assert report["input"]["counts"]["non_monotonic_stamps"] == 0
+    assert report["input"]["frames"] == N and len(report["input"]["segments"]) == 1
+    assert report["input"]["rate_hz"] == expected["input"]["rate_hz"] == 100.0
+    assert report["axes"] == expected["axes"]
+
+
 def test_an_imu_topic_whose_only_chunk_is_over_the_budget_says_why(
     tmp_path: Path, capsys, monkeypatch
 ) -> None:

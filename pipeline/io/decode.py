@@ -581,26 +581,88 @@ def _uses_log_time(steps: dict[str, _Steps], warnings: list[str]) -> bool:
 
 
 def _placed(steps: dict[str, _Steps]) -> bool:
-    """Whether header stamps are placed by the log time (:func:`_placed_after_resets`): their
-    clock was reset 1 to :data:`MAX_CLOCK_RESETS` times and the log time never (a log time
-    copied from the stamps resets with them)."""
-    return 0 < steps["stamp_ns"].resets <= MAX_CLOCK_RESETS and steps["log_time_ns"].resets == 0
+    """Whether header stamps are mended by the log time (:func:`_placed_after_resets`): they
+    step back by more than :data:`CLOCK_RESET_NS` somewhere and the log time never does (a log
+    time copied from the stamps would step back with them)."""
+    return steps["stamp_ns"].resets > 0 and steps["log_time_ns"].resets == 0
+
+
+def _median_ns(x: np.ndarray) -> int:
+    """The (upper) median of int64 nanoseconds, exact: not through float64, whose spacing is
+    256 ns at the ~1.7e18 ns since 1970 of a log time."""
+    return int(np.partition(x, len(x) // 2)[len(x) // 2])
+
+
+STRAY_WINDOW = 9
+"""Messages (odd) whose median ``log - stamp`` a stamp is compared with
+(:func:`_stray_stamps`): runs of up to half of it are strays, longer ones resets."""
+
+
+def _stray_stamps(stamps: np.ndarray, log: np.ndarray) -> np.ndarray:
+    """Indices of the messages whose stamp is more than :data:`CLOCK_RESET_NS` off what the log
+    time and their neighbours' stamps say: ``log - stamp`` (latency plus the clock's offset)
+    differs by more than that from its median over the :data:`STRAY_WINDOW` messages centred
+    on it (the first or last ones at the record's ends).  A stamp left at 0, or a second's or
+    an hour's error, in one message or a few among good ones; a reset of the clock shifts
+    every message after it, and none is a stray.  Only messages near a step of more than
+    :data:`CLOCK_RESET_NS` (which every stray makes) are looked at."""
+    half = STRAY_WINDOW // 2
+    steps = np.flatnonzero(np.abs(np.diff(stamps)) > CLOCK_RESET_NS)
+    near = np.unique(steps[:, None] + np.arange(-half, half + 2))
+    near = near[(near >= 0) & (near < len(stamps))]
+    start = np.clip(near - half, 0, max(len(stamps) - STRAY_WINDOW, 0))  # inside at the ends
+    window = np.minimum(start[:, None] + np.arange(STRAY_WINDOW), len(stamps) - 1)
+    offset = log[window] - stamps[window]
+    mid = np.partition(offset, half, axis=1)[:, half]
+    return near[np.abs(log[near] - stamps[near] - mid) > CLOCK_RESET_NS]
+
+
+def _mended_strays(stamps: np.ndarray, log: np.ndarray, warnings: list[str]) -> np.ndarray:
+    """A copy of ``stamps`` with each stray (:func:`_stray_stamps`) replaced by the stamps of
+    its nearest good neighbours, interpolated by message index (ns, int64 arithmetic), or
+    by the log time less its neighbours' median latency at the record's ends."""
+    half = STRAY_WINDOW // 2
+    out = stamps.copy()
+    stray = _stray_stamps(stamps, log)
+    if not len(stray):
+        return out
+    n = len(out)
+    runs = np.split(stray, np.flatnonzero(np.diff(stray) > 1) + 1)  # consecutive strays
+    for run in runs:
+        lo, hi = int(run[0]) - 1, int(run[-1]) + 1  # good: the runs are maximal
+        span = int(stamps[hi]) - int(stamps[lo]) if lo >= 0 and hi < n else 0
+        if 0 < span <= (hi - lo) * CLOCK_RESET_NS:  # (not across a reset)
+            out[run] = stamps[lo] + span * (run - lo) // (hi - lo)
+        else:
+            near = np.setdiff1d(np.arange(max(lo - half, 0), min(hi + half, n - 1) + 1), run)
+            out[run] = log[run] - _median_ns(log[near] - stamps[near])
+    off = (stamps[stray[0]] - out[stray[0]]) / 1e9
+    warnings.append(
+        f"{len(stray)} message(s) have a header.stamp more than {CLOCK_RESET_NS / 1e9:g} s off "
+        f"their neighbours' (message {stray[0]} by {off:.6g} s{'' if len(stray) == 1 else ', …'}"
+        "): each is replaced by its neighbours' stamps, interpolated"
+    )
+    return out
 
 
 def _placed_after_resets(stamps: np.ndarray, log: np.ndarray, warnings: list[str]) -> np.ndarray:
-    """The header ``stamps`` (ns) with each run after a clock reset (a step back by more than
-    :data:`CLOCK_RESET_NS`) moved onto the first run's clock by the MCAP ``log`` time: by the
-    difference of the runs' median ``log - stamps`` (the receive latency, the same on both
-    sides, cancels); a new array.  The time between the runs is then the log time's, a gap
+    """The header ``stamps`` (ns) mended by the MCAP ``log`` time, a new array: strays
+    replaced (:func:`_mended_strays`), then, after 1 to :data:`MAX_CLOCK_RESETS` clock resets
+    (a step back by more than :data:`CLOCK_RESET_NS`), each run moved onto the first run's
+    clock by the difference of the runs' median ``log - stamps`` (the receive latency, the
+    same on both sides, cancels).  The time between the runs is then the log time's, a gap
     like any other, instead of a jump back by the clock's age that would shorten the record
-    and raise its rate."""
-    resets = np.flatnonzero(np.diff(stamps) < -CLOCK_RESET_NS) + 1
-    edges = [0, *resets.tolist(), len(stamps)]
-    offsets = [int(np.median(log[a:b] - stamps[a:b])) for a, b in itertools.pairwise(edges)]
-    out = stamps.copy()
+    and raise its rate.  More resets are the interleaved clocks of several sensors, or
+    broken stamps: left as they are (conditioning names the steps back)."""
+    out = _mended_strays(stamps, log, warnings)
+    resets = np.flatnonzero(np.diff(out) < -CLOCK_RESET_NS) + 1
+    if not 0 < len(resets) <= MAX_CLOCK_RESETS:
+        return out
+    edges = [0, *resets.tolist(), len(out)]
+    offsets = [_median_ns(log[a:b] - out[a:b]) for a, b in itertools.pairwise(edges)]
+    back = (out[resets - 1] - out[resets]) / 1e9
     for (a, b), offset in zip(itertools.pairwise(edges), offsets, strict=True):
         out[a:b] += offset - offsets[0]
-    back = (stamps[resets - 1] - stamps[resets]) / 1e9
     warnings.append(
         f"header.stamp jumps back {len(resets)} time(s) (by {back[0]:.6g} s at message "
         f"{resets[0]}{'' if len(resets) == 1 else ', …'}: the clock that stamps them was reset, "

@@ -266,6 +266,40 @@ def test_a_temperature_stamped_by_another_clock_is_not_used(tmp_path: Path) -> N
     ]
 
 
+@pytest.mark.parametrize("keep_one", [False, True])
+def test_stray_stamps_are_mended_beside_a_reset(tmp_path: Path, keep_one: bool) -> None:
+    """A sensor clock (100 Hz, received 3 ms after each sample) reset once after message 600
+    by a restart of 2.5 s, and seven messages whose stamp is wrong by more than a second: the
+    first at 0, four in a row (-5 s, then +1 h), one just after the reset (0) and the last
+    (+1 h). Each stray takes its neighbours' interpolated stamp (the ends: the log time less
+    the latency), the reset is placed: t_s is the true time to 1 ns, stamp_ns the header's."""
+    n, reset = 900, 600
+    true_ns = np.arange(n) * 10_000_000 + np.where(np.arange(n) >= reset, 2_500_000_000, 0)
+    clock_zero = np.where(np.arange(n) >= reset, 1_000_000_000, 40_000_000_000)
+    header = clock_zero + true_ns - np.where(np.arange(n) >= reset, true_ns[reset], 0)
+    header[[0, reset + 2]] = 0
+    header[400] -= 5_000_000_000
+    header[401:404] += 3600_000_000_000
+    header[n - 1] += 3600_000_000_000
+    bag = tmp_path / "bag"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=TS)
+        for i in range(n):
+            msg = imu_msg(i, int(header[i]), np.zeros(3), np.array([0, 0, 9.8]), "imu")
+            log = T0 + int(true_ns[i]) + 3_000_000
+            writer.write(conn, log, TS.serialize_cdr(msg, conn.msgtype))
+    rec = decode(bag, keep_one_time_base=keep_one)
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), header)
+    np.testing.assert_allclose(rec.frames["t_s"].to_numpy(), true_ns / 1e9, rtol=0, atol=1e-9)
+    assert rec.warnings == [
+        "7 message(s) have a header.stamp more than 1 s off their neighbours' (message 0 by "
+        "-40 s, …): each is replaced by its neighbours' stamps, interpolated",
+        "header.stamp jumps back 1 time(s) (by 44.99 s at message 600: the clock that stamps "
+        "them was reset, e.g. a driver restarted with the sensor's clock): the messages after "
+        "each jump are placed by the MCAP log time",
+    ]
+
+
 @pytest.mark.parametrize("resets", [1, 11])
 def test_resets_are_not_placed_by_a_log_time_that_resets_too_or_when_too_many(
     tmp_path: Path, resets: int
