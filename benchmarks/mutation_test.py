@@ -261,7 +261,10 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/test_cli.py",
         "tests/fleet/test_fleet_cluster.py",
     ),
-    "pipeline/fleet/figure_plan.py": ("tests/fleet/test_fleet_population.py",),
+    "pipeline/fleet/figure_plan.py": (
+        "tests/fleet/test_fleet_population.py",
+        "tests/fleet/test_fleet_cluster.py",  # the figures written
+    ),
     "pipeline/analysis/workers.py": ("tests/analysis/test_workers.py", "tests/test_api.py"),
     "pipeline/recording/spi.py": ("tests/recording/test_spi.py",),
 }
