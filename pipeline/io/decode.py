@@ -673,15 +673,21 @@ def _placed_after_resets(stamps: np.ndarray, log: np.ndarray, warnings: list[str
 
 
 def _temperature(
-    temperature: _Columns, base: str, x: np.ndarray, out: np.ndarray, warnings: list[str]
+    temperature: _Columns,
+    base: str,
+    x: np.ndarray,
+    log: np.ndarray | None,
+    out: np.ndarray,
+    warnings: list[str],
 ) -> np.ndarray | None:
     """The Temperature topic's °C at each IMU frame, written into ``out`` (f64, may be ``x``'s
     own memory) and returned: linear interpolation at the frames' times ``x`` (ns, int64, on
     the IMU's time base ``base``: see :meth:`ScannedRecording.recording`), the temperature's
     messages on the same base (their log time; or their stamps, placed after their own clock
-    resets as the IMU's are), held before the first message and after the last.  None, with a
-    warning, when no message falls within the frames' span (a topic stamped by another clock)
-    or there is none."""
+    resets as the IMU's are), held before the first message and after the last.  When none
+    of its messages falls within the frames' span (stamped by another clock: the host's, the
+    IMU by the sensor's), both are placed by their log time (``log``, the IMU's, if kept),
+    with a warning; None, with a warning, if that does not help either, or without messages."""
     temp = temperature.concat()
     if base == "log_time_ns":
         at = temp["log_time_ns"]
@@ -691,17 +697,28 @@ def _temperature(
         at = temp["stamp_ns"]
     if not len(at):
         return None
-    if not ((at >= x.min()) & (at <= x.max())).any():
+    if not _overlaps(at, x):
+        clock = "log time" if base == "log_time_ns" else "header.stamp"
+        if log is None or base == "log_time_ns" or not _overlaps(temp["log_time_ns"], log):
+            warnings.append(
+                f"the temperature topic's {len(at)} message(s) are stamped outside the IMU's "
+                f"time span ({clock}: another clock?): the temperature is not used"
+            )
+            return None
         warnings.append(
             f"the temperature topic's {len(at)} message(s) are stamped outside the IMU's time "
-            f"span ({'log time' if base == 'log_time_ns' else 'header.stamp'}: another clock?): "
-            "the temperature is not used"
+            f"span ({clock}: another clock?): it is placed by the MCAP log time"
         )
-        return None
+        x, at = log, temp["log_time_ns"]
     order = np.argsort(at, kind="stable")
     origin = x[0]  # times as f64 after it: ns exact, not to 256 ns as ~1.7e18 ns since 1970
     xp, fp = (at[order] - origin).astype(np.float64), temp["temp_c"][order]
     return _map_chunks(x, lambda s: np.interp((s - origin).astype(np.float64), xp, fp), out)
+
+
+def _overlaps(at: np.ndarray, x: np.ndarray) -> bool:
+    """Whether any of the times ``at`` lies within the span of the times ``x``."""
+    return bool(((at >= x.min()) & (at <= x.max())).any())
 
 
 def _seconds(cols: dict[str, np.ndarray], use_log: bool, keep_stamps: bool) -> np.ndarray:
@@ -780,7 +797,11 @@ class ScannedRecording:
         (None: all kept)."""
         if self.channel.spill is None or columns is None:
             return None
-        return frozenset(columns | (_BASE_COLUMNS[base] if base else frozenset()))
+        raw = columns | (_BASE_COLUMNS[base] if base else frozenset())
+        if self.kind == "imu" and "temp_c" in columns:  # (the log time places a temperature
+            # stamped by another clock)
+            raw |= {"log_time_ns"}
+        return frozenset(raw)
 
     def recording(self, columns: frozenset[str] | None = None) -> ImuRecording | None:
         """The frame of the decode contract, or of ``columns`` only (``nonfinite``:
@@ -809,7 +830,8 @@ class ScannedRecording:
             reuse = not timed and base not in columns  # (columns is not None when untimed)
             x = cols.pop(base) if reuse else cols[base]
             out = x.view(np.float64) if reuse else np.empty(n)
-            temp_c = _temperature(self.temperature, base, x, out, warnings)
+            log = cols.get("log_time_ns")
+            temp_c = _temperature(self.temperature, base, x, log, out, warnings)
         t_s, time_source = None, ""
         if timed:
             keep_stamps = columns is None or "stamp_ns" in columns

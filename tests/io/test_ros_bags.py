@@ -244,26 +244,37 @@ def test_runs_after_clock_resets_are_placed_by_the_log_time(tmp_path: Path, keep
     ]
 
 
-def test_a_temperature_stamped_by_another_clock_is_not_used(tmp_path: Path) -> None:
+@pytest.mark.parametrize("keep_one", [False, True])
+def test_a_temperature_stamped_by_another_clock_is_placed_by_the_log_time(
+    tmp_path: Path, keep_one: bool
+) -> None:
     """The IMU stamped by the sensor's clock (seconds since its power-up), its temperature by
-    the host's: no temperature message falls within the IMU's stamps, so none is read as the
-    temperature of any frame (before: every frame got the last message's value)."""
+    the host's: no temperature message falls within the IMU's stamps, so both are placed by
+    their log time (before: every frame got the last message's value). Without the log time
+    (kept only for the time base's sake, ``keep_one_time_base``) it is not used."""
     bag = tmp_path / "bag"
     with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=TS)
         tconn = writer.add_connection("/imu/temp", "sensor_msgs/msg/Temperature", typestore=TS)
         for i in range(300):
             msg = imu_msg(i, 7_000_000_000 + i * 10_000_000, np.zeros(3), np.zeros(3), "imu")
-            writer.write(conn, T0 + i * 10_000_000, TS.serialize_cdr(msg, conn.msgtype))
+            writer.write(conn, T0 + i * 10_000_000 + 2_000_000, TS.serialize_cdr(msg, conn.msgtype))
             if i % 100 == 0:
                 temp = temperature_msg(T0 + i * 10_000_000, 25.0 + i)
-                writer.write(tconn, T0 + i * 10_000_000, TS.serialize_cdr(temp, tconn.msgtype))
-    rec = decode(bag)
-    assert rec.frames["temp_c"].null_count() == 300
-    assert rec.warnings == [
+                log = T0 + i * 10_000_000 + 2_000_000  # received with the IMU's sample
+                writer.write(tconn, log, TS.serialize_cdr(temp, tconn.msgtype))
+    rec = decode(bag, keep_one_time_base=keep_one)
+    outside = (
         "the temperature topic's 3 message(s) are stamped outside the IMU's time span "
-        "(header.stamp: another clock?): the temperature is not used"
-    ]
+        "(header.stamp: another clock?): "
+    )
+    if keep_one:
+        assert rec.frames["temp_c"].null_count() == 300
+        assert rec.warnings == [outside + "the temperature is not used"]
+    else:
+        expected = 25.0 + np.minimum(np.arange(300), 200)  # held after the last message
+        np.testing.assert_allclose(rec.frames["temp_c"].to_numpy(), expected, rtol=0, atol=1e-9)
+        assert rec.warnings == [outside + "it is placed by the MCAP log time"]
 
 
 @pytest.mark.parametrize("keep_one", [False, True])
