@@ -36,7 +36,7 @@ from typing import Literal
 import numpy as np
 
 from imupipe.errors import ImupipeError
-from imupipe.io.decode import FRAME_ID_SAMPLE, ImuRecording, nonfinite_bits
+from imupipe.io.decode import CLOCK_RESET_NS, FRAME_ID_SAMPLE, ImuRecording, nonfinite_bits
 from imupipe.stats import robust
 from imupipe.stats.allan import clean_runs, run_offsets
 from imupipe.vocab import AXES
@@ -461,14 +461,17 @@ def _breaks(
     return breaks, counts
 
 
-def _step_jitter(t: np.ndarray) -> float:
-    """Standard deviation of the stamp steps np.std(np.diff(t)), :data:`_CHUNK` at a time."""
-    mean = (t[-1] - t[0]) / (len(t) - 1)  # the steps' mean, by telescoping
-    total = sum(
-        float(np.sum((np.diff(t[i : i + _CHUNK + 1]) - mean) ** 2))
-        for i in range(0, len(t) - 1, _CHUNK)
-    )
-    return float(np.sqrt(total / (len(t) - 1)))
+def _step_jitter(t: np.ndarray, mean: float) -> float:
+    """Standard deviation of the stamp steps np.diff(t) about their ``mean`` (s), :data:`_CHUNK`
+    at a time; steps back of more than :data:`imupipe.io.decode.CLOCK_RESET_NS` (resets of the
+    stamping clock, :func:`_time_and_places`) are not steps of the sampling."""
+    total, steps = 0.0, 0
+    for i in range(0, len(t) - 1, _CHUNK):
+        d = np.diff(t[i : i + _CHUNK + 1])
+        d = d[d >= -CLOCK_RESET_NS / 1e9]
+        total += float(np.sum((d - mean) ** 2))
+        steps += len(d)
+    return float(np.sqrt(total / steps))
 
 
 def _grid_places(
@@ -740,7 +743,8 @@ def condition(
     if jittery:  # frames in order; breaks only where the stamps' envelope says frames were lost
         places = _envelope_places(t, period)
         if "output_rate_hz" not in rec.device:  # no rate but the stamps': theirs, now placed
-            rate = places[-1] / (t[-1] - t[0])
+            span, places_spanned = _time_and_places(t, places, 0, n - 1)
+            rate = places_spanned / span
             period = 1.0 / rate
         lost = np.diff(places) - 1
         breaks[1:n] = lost > 0
@@ -829,9 +833,10 @@ def condition(
         )
 
     seg_t = t[seg.start - offset : seg.stop - offset]
-    tau0 = (seg_t[-1] - seg_t[0]) / (seg.frames - 1) if seg.frames > 1 else period
+    span, places_spanned = _time_and_places(t, None, seg.start - offset, seg.stop - offset - 1)
+    tau0 = span / places_spanned if seg.frames > 1 else period
     if seg.frames > 2:
-        jitter = _step_jitter(seg_t) / tau0
+        jitter = _step_jitter(seg_t, tau0) / tau0
         counts["jitter_ppm"] = round(jitter * 1e6)
         if jitter > JITTER_WARN and not jittery:  # (jittery: said above)
             warnings.append(
@@ -854,6 +859,19 @@ def condition(
         absent_axes=absent,
         window_s=(start_s, end_s),
     )
+
+
+def _time_and_places(
+    t: np.ndarray, place: np.ndarray | None, first: int, last: int
+) -> tuple[float, int]:
+    """The time (s) and the grid places (``place``; None: one per row) from row ``first`` to
+    row ``last``, whose ratio is the mean sample period, summed over the runs between steps
+    back of more than :data:`imupipe.io.decode.CLOCK_RESET_NS` (resets of the stamping clock
+    that the log time could not place: across one, the end points' times say nothing)."""
+    resets = first + 1 + np.flatnonzero(np.diff(t[first : last + 1]) < -CLOCK_RESET_NS / 1e9)
+    pairs = list(zip([first, *resets.tolist()], [*(resets - 1).tolist(), last], strict=True))
+    spanned = sum(b - a if place is None else int(place[b] - place[a]) for a, b in pairs)
+    return sum(float(t[b] - t[a]) for a, b in pairs), spanned
 
 
 def _masked_series(
@@ -885,7 +903,8 @@ def _masked_series(
     if n_excluded > MAX_MASKED_FRACTION * len(excluded) or usable_row.sum() < 2:
         return None
     first, last = np.flatnonzero(usable_row)[[0, -1]]
-    tau0 = float((t[last] - t[first]) / (place[last] - place[first]))
+    span, places_spanned = _time_and_places(t, place, first, last)
+    tau0 = span / places_spanned
     counts["masked_samples"] = n_excluded
     counts["grid_samples"] = len(excluded)
     warnings = [_mask_warning(len(excluded), n_excluded, len(t))]

@@ -288,8 +288,10 @@ class _Steps:
         self.count = 0
         self.resets = 0
         self.nonzero = False
+        self.values = 0
 
     def add(self, x: np.ndarray) -> None:
+        self.values += len(x)
         if len(x):
             steps = np.diff(x, prepend=x[0] if self.last is None else self.last)
             self.count += int(np.count_nonzero(steps <= 0)) - int(self.last is None)
@@ -645,7 +647,16 @@ def _mended_strays(stamps: np.ndarray, log: np.ndarray, warnings: list[str]) -> 
     return out
 
 
-def _placed_after_resets(stamps: np.ndarray, log: np.ndarray, warnings: list[str]) -> np.ndarray:
+def _advances(steps: _Steps) -> bool:
+    """Whether a log time tells when messages arrived: at most 90 % of its steps are not
+    forward (a writer that set every log time to 0, or to one value per second, does not;
+    receive times a few messages share, as in bursts, do)."""
+    return steps.count <= 0.9 * max(steps.values - 1, 1)
+
+
+def _placed_after_resets(
+    stamps: np.ndarray, log: np.ndarray, warnings: list[str], place: bool = True
+) -> np.ndarray:
     """The header ``stamps`` (ns) mended by the MCAP ``log`` time, a new array: strays
     replaced (:func:`_mended_strays`), then, after 1 to :data:`MAX_CLOCK_RESETS` clock resets
     (a step back by more than :data:`CLOCK_RESET_NS`), each run moved onto the first run's
@@ -653,10 +664,11 @@ def _placed_after_resets(stamps: np.ndarray, log: np.ndarray, warnings: list[str
     same on both sides, cancels).  The time between the runs is then the log time's, a gap
     like any other, instead of a jump back by the clock's age that would shorten the record
     and raise its rate.  More resets are the interleaved clocks of several sensors, or
-    broken stamps: left as they are (conditioning names the steps back)."""
+    broken stamps, and a log time that does not ``place`` them (:func:`_advances`) cannot:
+    those are left as they are (conditioning names the steps back)."""
     out = _mended_strays(stamps, log, warnings)
     resets = np.flatnonzero(np.diff(out) < -CLOCK_RESET_NS) + 1
-    if not 0 < len(resets) <= MAX_CLOCK_RESETS:
+    if not (place and 0 < len(resets) <= MAX_CLOCK_RESETS):
         return out
     edges = [0, *resets.tolist(), len(out)]
     offsets = [_median_ns(log[a:b] - out[a:b]) for a, b in itertools.pairwise(edges)]
@@ -692,7 +704,8 @@ def _temperature(
     if base == "log_time_ns":
         at = temp["log_time_ns"]
     elif base == "placed_stamp_ns" and _placed(temperature.steps):
-        at = _placed_after_resets(temp["stamp_ns"], temp["log_time_ns"], [])
+        place = _advances(temperature.steps["log_time_ns"])
+        at = _placed_after_resets(temp["stamp_ns"], temp["log_time_ns"], [], place)
     else:
         at = temp["stamp_ns"]
     if not len(at):
@@ -824,7 +837,8 @@ class ScannedRecording:
         n = self.rows
         cols = self.channel.concat(self._raw(columns, base))
         if base == "placed_stamp_ns":
-            cols[base] = _placed_after_resets(cols["stamp_ns"], cols["log_time_ns"], noted)
+            place = _advances(self.channel.steps["log_time_ns"])
+            cols[base] = _placed_after_resets(cols["stamp_ns"], cols["log_time_ns"], noted, place)
         temp_c = None
         if warm and base is not None:
             reuse = not timed and base not in columns  # (columns is not None when untimed)
