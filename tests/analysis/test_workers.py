@@ -114,7 +114,7 @@ def test_axes_at_once_obeys_workers_axes_and_memory(monkeypatch: pytest.MonkeyPa
     assert workers.axes_at_once(4, 6, 100, -5_000) == 1  # over the budget already
     assert workers.axes_at_once(4, 6, 1, 3) == 4  # axes of one byte: three more fit in 3
     assert workers.axes_at_once(4, 6, 1, 0) == 1  # no byte to spare
-    assert workers.axes_at_once(4, 6, 0, 0) == 4  # axes that need no memory
+    assert workers.axes_at_once(4, 6, 0, 3) == 4  # axes that need no memory: a byte each
     assert workers.axes_at_once(0, 6, 100, 10_000) == 1  # at least one
 
 
