@@ -40,7 +40,7 @@ from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.recording.recorder import FrameWriter
 from imupipe.recording.simulator import VirtualADIS16364
 from imupipe.testing.busy_bag import Stream, write_bag
-from imupipe.testing.ros_cdr import imu_payloads
+from imupipe.testing.ros_cdr import imu_payloads, temperature_payloads
 from imupipe.vocab import AXES
 
 RATE_HZ = 100.0
@@ -751,6 +751,57 @@ def test_a_reset_the_log_time_cannot_place_joins_the_runs(
     for axis in AXES:  # white noise of 1e-3 / 3e-3 a sample at 100 Hz
         n = report["axes"][axis]["ieee952"]["random_walk"]["value"]
         assert n == pytest.approx((1e-3 if axis.startswith("gyro") else 3e-3) / 10, rel=0.03)
+
+
+@pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
+def test_a_temperature_the_host_stamps_still_drives_the_loop(
+    tmp_path: Path, capsys, budget: list[str]
+) -> None:
+    """The IMU stamped by its own clock (from 5 s after power-up), its temperature (1 Hz, a
+    random wander of 1 °C a second) by the host's, both received 2 ms late; gyro_x's bias
+    follows the temperature by 1e-3 rad/s/K. Before session 40 no temperature message fell
+    within the IMU's stamps, so every frame read the last one and the loop could not see the
+    effect. Both are now placed by their log time, in memory and on the low-memory path (whose
+    conditioning says so too), and the loop finds the effect with the coefficient."""
+    n = N
+    sensor_ns = 5 * 10**9 + np.arange(n, dtype=np.int64) * 10_000_000
+    host_ns = 1_700_000_000_000_000_000 + np.arange(n, dtype=np.int64) * 10_000_000
+    _, gyro, accel = imu_stream()
+    wander = np.cumsum(np.random.default_rng(5).normal(0, 1, n // 100 + 1))  # °C, 1 Hz
+    celsius = 25.0 + np.interp(np.arange(n) / 100, np.arange(len(wander)), wander)
+    gyro[:, 0] += 1e-3 * (celsius - 25.0)
+    path = tmp_path / "f.mcap"
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        temp_schema = w.register_schema("sensor_msgs/msg/Temperature", "ros2msg", b"")
+        temp = w.register_channel("/imu/temperature", "cdr", temp_schema)
+        for start in range(0, n, 3000):
+            rows = slice(start, start + 3000)
+            w.write_chunk(
+                imu,
+                host_ns[rows] + 2_000_000,
+                imu_payloads(sensor_ns[rows], gyro[rows], accel[rows]),
+            )
+            each_second = slice(start, start + 3000, 100)
+            w.write_chunk(
+                temp,
+                host_ns[each_second] + 2_000_000,
+                temperature_payloads(host_ns[each_second], celsius[each_second]),
+            )
+        w.finish()
+    code, report, err = analyze(path, capsys, "--loop", *budget)
+    assert code == 0, err
+    assert report["input"]["warnings"][0] == (
+        "the temperature topic's 120 message(s) are stamped outside the IMU's time span "
+        "(header.stamp: another clock?): it is placed by the MCAP log time"
+    )
+    found = {axis: [e["kind"] for e in a["effects"]] for axis, a in report["axes"].items()}
+    assert "temperature" in found.pop("gyro_x")  # (with a ramp: the wander's own trend)
+    assert found == {axis: [] for axis in AXES[1:]}
+    (effect,) = [e for e in report["axes"]["gyro_x"]["effects"] if e["kind"] == "temperature"]
+    lo, hi = effect["intervals"]["coefficient"]
+    assert 0.5e-3 < lo <= 1e-3 <= hi < 2e-3  # (wide: the ramp shares part of the trend)
 
 
 def test_an_imu_topic_whose_only_chunk_is_over_the_budget_says_why(

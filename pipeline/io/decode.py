@@ -684,21 +684,19 @@ def _placed_after_resets(
     return out
 
 
-def _temperature(
+def _temperature_times(
     temperature: _Columns,
     base: str,
     x: np.ndarray,
     log: np.ndarray | None,
-    out: np.ndarray,
     warnings: list[str],
-) -> np.ndarray | None:
-    """The Temperature topic's °C at each IMU frame, written into ``out`` (f64, may be ``x``'s
-    own memory) and returned: linear interpolation at the frames' times ``x`` (ns, int64, on
-    the IMU's time base ``base``: see :meth:`ScannedRecording.recording`), the temperature's
-    messages on the same base (their log time; or their stamps, placed after their own clock
-    resets as the IMU's are), held before the first message and after the last.  When none
-    of its messages falls within the frames' span (stamped by another clock: the host's, the
-    IMU by the sensor's), both are placed by their log time (``log``, the IMU's, if kept),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Where to read the Temperature topic at each IMU frame: (the frames' times, its messages'
+    times on the same clock, their °C), ns int64.  The frames' times are ``x`` (the IMU's time
+    base ``base``: see :meth:`ScannedRecording.recording`) and the messages' the same base
+    (their log time; or their stamps, placed after their own clock resets as the IMU's are).
+    When none of its messages falls within the frames' span (stamped by another clock: the
+    host's, the IMU by the sensor's), both are their log times (``log``, the IMU's, if kept),
     with a warning; None, with a warning, if that does not help either, or without messages."""
     temp = temperature.concat()
     if base == "log_time_ns":
@@ -723,9 +721,17 @@ def _temperature(
             f"span ({clock}: another clock?): it is placed by the MCAP log time"
         )
         x, at = log, temp["log_time_ns"]
+    return x, at, temp["temp_c"]
+
+
+def _temperature(times: tuple[np.ndarray, np.ndarray, np.ndarray], out: np.ndarray) -> np.ndarray:
+    """The temperature (°C) at each IMU frame from its :func:`_temperature_times`, written into
+    ``out`` (f64, may be the frames' times' own memory) and returned: linear interpolation,
+    held before the first message and after the last."""
+    x, at, celsius = times
     order = np.argsort(at, kind="stable")
     origin = x[0]  # times as f64 after it: ns exact, not to 256 ns as ~1.7e18 ns since 1970
-    xp, fp = (at[order] - origin).astype(np.float64), temp["temp_c"][order]
+    xp, fp = (at[order] - origin).astype(np.float64), celsius[order]
     return _map_chunks(x, lambda s: np.interp((s - origin).astype(np.float64), xp, fp), out)
 
 
@@ -811,8 +817,8 @@ class ScannedRecording:
         if self.channel.spill is None or columns is None:
             return None
         raw = columns | (_BASE_COLUMNS[base] if base else frozenset())
-        if self.kind == "imu" and "temp_c" in columns:  # (the log time places a temperature
-            # stamped by another clock)
+        if self.temperature is not None and columns & {"t_s", "temp_c"}:  # (the log time
+            # places a temperature stamped by another clock)
             raw |= {"log_time_ns"}
         return frozenset(raw)
 
@@ -840,12 +846,14 @@ class ScannedRecording:
             place = _advances(self.channel.steps["log_time_ns"])
             cols[base] = _placed_after_resets(cols["stamp_ns"], cols["log_time_ns"], noted, place)
         temp_c = None
-        if warm and base is not None:
-            reuse = not timed and base not in columns  # (columns is not None when untimed)
+        if self.temperature is not None and base is not None:  # (warned with t_s, as the
+            # spilled source's conditioning reads it without temp_c)
+            reuse = warm and not timed and base not in columns  # (columns: not None untimed)
             x = cols.pop(base) if reuse else cols[base]
-            out = x.view(np.float64) if reuse else np.empty(n)
             log = cols.get("log_time_ns")
-            temp_c = _temperature(self.temperature, base, x, log, out, warnings)
+            times = _temperature_times(self.temperature, base, x, log, warnings)
+            if warm and times is not None:
+                temp_c = _temperature(times, x.view(np.float64) if reuse else np.empty(n))
         t_s, time_source = None, ""
         if timed:
             keep_stamps = columns is None or "stamp_ns" in columns
