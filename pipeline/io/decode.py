@@ -583,10 +583,16 @@ def _uses_log_time(steps: dict[str, _Steps], warnings: list[str]) -> bool:
 
 
 def _placed(steps: dict[str, _Steps]) -> bool:
-    """Whether header stamps are mended by the log time (:func:`_placed_after_resets`): they
-    step back by more than :data:`CLOCK_RESET_NS` somewhere and the log time never does (a log
-    time copied from the stamps would step back with them)."""
-    return steps["stamp_ns"].resets > 0 and steps["log_time_ns"].resets == 0
+    """Whether header stamps are mended (:func:`_placed_after_resets`): they step back by more
+    than :data:`CLOCK_RESET_NS` somewhere."""
+    return steps["stamp_ns"].resets > 0
+
+
+def _places(steps: dict[str, _Steps]) -> bool:
+    """Whether the log time places the runs of reset stamps: it never steps back by more than
+    :data:`CLOCK_RESET_NS` (a log time copied from the stamps would step back with them) and
+    advances (:func:`_advances`)."""
+    return steps["log_time_ns"].resets == 0 and _advances(steps["log_time_ns"])
 
 
 def _median_ns(x: np.ndarray) -> int:
@@ -657,29 +663,43 @@ def _advances(steps: _Steps) -> bool:
 def _placed_after_resets(
     stamps: np.ndarray, log: np.ndarray, warnings: list[str], place: bool = True
 ) -> np.ndarray:
-    """The header ``stamps`` (ns) mended by the MCAP ``log`` time, a new array: strays
-    replaced (:func:`_mended_strays`), then, after 1 to :data:`MAX_CLOCK_RESETS` clock resets
-    (a step back by more than :data:`CLOCK_RESET_NS`), each run moved onto the first run's
-    clock by the difference of the runs' median ``log - stamps`` (the receive latency, the
-    same on both sides, cancels).  The time between the runs is then the log time's, a gap
-    like any other, instead of a jump back by the clock's age that would shorten the record
-    and raise its rate.  More resets are the interleaved clocks of several sensors, or
-    broken stamps, and a log time that does not ``place`` them (:func:`_advances`) cannot:
-    those are left as they are (conditioning names the steps back)."""
+    """The header ``stamps`` (ns) mended, a new array: strays replaced by the MCAP ``log``
+    time (:func:`_mended_strays`), then, after 1 to :data:`MAX_CLOCK_RESETS` clock resets (a
+    step back by more than :data:`CLOCK_RESET_NS`), each run moved onto the first run's clock:
+    by the difference of the runs' median ``log - stamps`` (the receive latency, the same on
+    both sides, cancels), the time between the runs then the log time's, a gap like any
+    other; or, where the log time cannot ``place`` them (it resets with the stamps, or does
+    not advance: :func:`_advances`), one sample after the run before (the runs' median step
+    later: one frame lost, so that no Allan term spans the join).  Either instead of a jump
+    back by the clock's age that would shorten the record and raise its rate.  More resets
+    are the interleaved clocks of several sensors, or broken stamps: left as they are
+    (conditioning names the steps back)."""
     out = _mended_strays(stamps, log, warnings)
     resets = np.flatnonzero(np.diff(out) < -CLOCK_RESET_NS) + 1
-    if not (place and 0 < len(resets) <= MAX_CLOCK_RESETS):
+    if not 0 < len(resets) <= MAX_CLOCK_RESETS:
         return out
     edges = [0, *resets.tolist(), len(out)]
-    offsets = [_median_ns(log[a:b] - out[a:b]) for a, b in itertools.pairwise(edges)]
+    runs = list(itertools.pairwise(edges))
     back = (out[resets - 1] - out[resets]) / 1e9
-    for (a, b), offset in zip(itertools.pairwise(edges), offsets, strict=True):
-        out[a:b] += offset - offsets[0]
+    if place:
+        offsets = [_median_ns(log[a:b] - out[a:b]) for a, b in runs]
+        for (a, b), offset in zip(runs, offsets, strict=True):
+            out[a:b] += offset - offsets[0]
+        how = "the messages after each jump are placed by the MCAP log time"
+    else:
+        steps = np.diff(out)
+        period = _median_ns(steps[(steps > 0) & (steps <= CLOCK_RESET_NS)])
+        for a, b in runs[1:]:
+            out[a:b] += out[a - 1] + 2 * period - out[a]
+        how = (
+            "the log time cannot place the runs (it resets with the stamps, or does not "
+            "advance): each is joined one sample after the run before, the time between them "
+            "unknown"
+        )
     warnings.append(
         f"header.stamp jumps back {len(resets)} time(s) (by {back[0]:.6g} s at message "
         f"{resets[0]}{'' if len(resets) == 1 else ', …'}: the clock that stamps them was reset, "
-        "e.g. a driver restarted with the sensor's clock): the messages after each jump are "
-        "placed by the MCAP log time"
+        f"e.g. a driver restarted with the sensor's clock): {how}"
     )
     return out
 
@@ -702,7 +722,7 @@ def _temperature_times(
     if base == "log_time_ns":
         at = temp["log_time_ns"]
     elif base == "placed_stamp_ns" and _placed(temperature.steps):
-        place = _advances(temperature.steps["log_time_ns"])
+        place = _places(temperature.steps)
         at = _placed_after_resets(temp["stamp_ns"], temp["log_time_ns"], [], place)
     else:
         at = temp["stamp_ns"]
@@ -843,7 +863,7 @@ class ScannedRecording:
         n = self.rows
         cols = self.channel.concat(self._raw(columns, base))
         if base == "placed_stamp_ns":
-            place = _advances(self.channel.steps["log_time_ns"])
+            place = _places(self.channel.steps)
             cols[base] = _placed_after_resets(cols["stamp_ns"], cols["log_time_ns"], noted, place)
         temp_c = None
         if self.temperature is not None and base is not None:  # (warned with t_s, as the

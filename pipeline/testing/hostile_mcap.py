@@ -161,9 +161,13 @@ def _chunk_records(body: bytes) -> bytes:
     return chunk.data if chunk.compression == "" else b""
 
 
-def imu_message_records(channel_id: int, n: int, rate_hz: float = 100.0) -> bytes:
-    """``n`` Imu Message records of ``channel_id`` (zeros, stamps set), uncompressed."""
-    log = T0_NS + np.round(np.arange(n) * 1e9 / rate_hz).astype(np.int64)
+def imu_message_records(
+    channel_id: int, n: int, rate_hz: float = 100.0, first: int = 3000
+) -> bytes:
+    """``n`` Imu Message records of ``channel_id`` (zeros, stamps set), uncompressed, stamped
+    and logged from sample ``first`` on (default: after the messages of :func:`imu_file`; a
+    restart from 0 would read as a reset of the stamping clock)."""
+    log = T0_NS + np.round(np.arange(first, first + n) * 1e9 / rate_hz).astype(np.int64)
     payloads = imu_payloads(log, np.zeros((n, 3)), np.zeros((n, 3)))
     pairs = zip(log, payloads, strict=True)
     return b"".join(message(channel_id, int(t), p.tobytes()) for t, p in pairs)

@@ -254,13 +254,13 @@ def test_a_chunk_inside_a_chunk_between_messages_is_counted_and_the_walk_goes_on
     from imupipe.testing import hostile_mcap as hm
 
     inner = hm.chunk(hm.imu_message_records(1, 50), "none")
-    records = hm.imu_message_records(1, 5) + inner + hm.imu_message_records(1, 7)
+    records = hm.imu_message_records(1, 5) + inner + hm.imu_message_records(1, 7, first=3005)
     rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=(hm.chunk(records),)))
     assert rec.frames.height == 3012
     assert list(rec.warnings) == ["skipped 1 unreadable nested chunk record(s)"]
     # a private record (opcodes 0x80-0xFF: readers ignore them, MCAP spec) is no nested chunk
     private = hm.record(0x80, b"vendor data")
-    records = hm.imu_message_records(1, 5) + private + hm.imu_message_records(1, 7)
+    records = hm.imu_message_records(1, 5) + private + hm.imu_message_records(1, 7, first=3005)
     rec = decode(hm.imu_file(tmp_path / "y.mcap", extra=(hm.chunk(records),)))
     assert rec.frames.height == 3012
     assert list(rec.warnings) == []
