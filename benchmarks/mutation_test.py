@@ -252,6 +252,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/fleet/test_fleet_cluster.py",
     ),
     "pipeline/fleet/task.py": (
+        "tests/fleet/test_fleet_task.py",
         "tests/fleet/test_fleet_population.py",
         "tests/analysis/test_workers.py",
         "tests/fleet/test_fleet_cluster.py",
