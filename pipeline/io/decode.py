@@ -688,7 +688,8 @@ def _placed_after_resets(
         how = "the messages after each jump are placed by the MCAP log time"
     else:
         steps = np.diff(out)
-        period = _median_ns(steps[(steps > 0) & (steps <= CLOCK_RESET_NS)])
+        steps = steps[(steps > 0) & (steps <= CLOCK_RESET_NS)]
+        period = _median_ns(steps) if len(steps) else 0  # (none: a duplicate stamp, flagged)
         for a, b in runs[1:]:
             out[a:b] += out[a - 1] + 2 * period - out[a]
         how = (
