@@ -289,7 +289,14 @@ def test_the_median_range_reaches_fleet_json_and_fleet_md():
     rows = {i: r[4:6] for i, r in enumerate(population_rows([most, straddle, exact, half]))}
     assert rows[0] == (f"≤ {1e-3 * deg:.4g}", "—")
     assert rows[1] == (f"{2e-3 * deg:.4g} – {3e-3 * deg:.4g}", "—")
-    assert rows[2][0] == f"{4e-3 * deg:.4g}" and rows[2][1] != "—"
+    # the robust spread: 1.4826 × the MAD (1e-3) over the median (4e-3), in %
+    assert exact.robust_spread == pytest.approx(1.4826 * 1e-3 / 4e-3, rel=1e-4)
+    assert rows[2] == (f"{4e-3 * deg:.4g}", "37 %")
+    lo, hi = exact.tolerance
+    assert lo < 4e-3 < hi
+    assert _stats_json(exact)["tolerance"] | {"method": None} == {
+        "lo": lo, "hi": hi, "coverage": 0.95, "confidence": 0.95, "method": None
+    }  # fmt: skip
     assert rows[3] == (f"{2e-3 * deg:.4g}", "—")  # exact, but no spread with a bound
 
 
