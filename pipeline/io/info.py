@@ -73,9 +73,10 @@ class RecordingInfo:
         for t in self.topics:
             rate = (t.messages - 1) / t.duration_s if t.duration_s > 0 else 0.0
             kind = t.schema if t.read else f"{t.schema}, {t.encoding!r} encoding: not read"
-            out.append(
-                f"  {t.topic}  [{kind}]  {t.messages} messages, {t.duration_s:.1f} s, {rate:.2f} Hz"
-            )
+            timing = f"{t.duration_s:.1f} s, {rate:.2f} Hz"
+            if t.messages > 1 and t.start_ns is not None and t.start_ns == t.end_ns:
+                timing = f"every log time {t.start_ns} ns (not set by the file's writer?)"
+            out.append(f"  {t.topic}  [{kind}]  {t.messages} messages, {timing}")
         for name, meta in self.metadata.items():
             out.append(
                 f"  metadata {name}: " + ", ".join(f"{k}={shown(v)}" for k, v in meta.items())

@@ -60,6 +60,10 @@ def test_a_topics_duration_is_its_log_time_span() -> None:
     head, rate_line = RecordingInfo(Path("f"), 0, 0, [topic], {}).lines()
     assert head == "f: 0.0 MB, 0 chunks"  # MCAP unless said otherwise
     assert rate_line.endswith("3 messages, 3.5 s, 0.57 Hz")  # (3 − 1) / 3.5 s
+    unset = TopicInfo("/imu", IMU, messages=3, start_ns=0, end_ns=0)  # a writer's log times
+    assert RecordingInfo(Path("f"), 0, 0, [unset], {}).lines()[1] == (
+        f"  /imu  [{IMU}]  3 messages, every log time 0 ns (not set by the file's writer?)"
+    )
 
 
 def test_a_sqlite_bag_names_its_storage(tmp_path: Path) -> None:
