@@ -311,6 +311,30 @@ def test_stray_stamps_are_mended_beside_a_reset(tmp_path: Path, keep_one: bool) 
     ]
 
 
+def test_a_stray_among_fewer_messages_than_its_window(tmp_path: Path) -> None:
+    """Six messages (under the nine a stray is compared with), the third stamped 0: the window
+    stays inside the record and the stray takes its neighbours' interpolated stamp."""
+    header = T0 + np.arange(6) * 10_000_000
+    header[2] = 0
+    bag = tmp_path / "bag"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=TS)
+        for i in range(6):
+            msg = imu_msg(i, int(header[i]), np.zeros(3), np.array([0, 0, 9.8]), "imu")
+            writer.write(conn, T0 + i * 10_000_000 + 1_000_000, TS.serialize_cdr(msg, conn.msgtype))
+    rec = decode(bag)
+    np.testing.assert_array_equal(rec.frames["t_s"].to_numpy(), np.arange(6) / 100)
+
+
+def test_the_median_of_nanoseconds_is_exact() -> None:
+    """The offsets that place runs and strays: exact int64 medians (the upper one of an even
+    count), not through float64 (256 ns apart at ~1.7e18 ns)."""
+    from imupipe.io.decode import _median_ns
+
+    assert _median_ns(np.array([5, 1, 4, 2, 3])) == 3
+    assert _median_ns(np.array([9, 8, 7, 6, 5, 4, 3, 2, 1, 0]) + T0 + 1) == T0 + 6
+
+
 @pytest.mark.parametrize("resets", [1, 11])
 def test_resets_a_log_time_cannot_place_are_joined_and_too_many_left(
     tmp_path: Path, resets: int
