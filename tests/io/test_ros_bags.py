@@ -333,6 +333,8 @@ def test_the_median_of_nanoseconds_is_exact() -> None:
 
     assert _median_ns(np.array([5, 1, 4, 2, 3])) == 3
     assert _median_ns(np.array([9, 8, 7, 6, 5, 4, 3, 2, 1, 0]) + T0 + 1) == T0 + 6
+    latency = np.random.default_rng(0).integers(0, 10**9, 1000)  # a run's log − stamp
+    assert _median_ns(T0 + latency) == T0 + np.sort(latency)[500]
 
 
 @pytest.mark.parametrize("resets", [1, 11])
