@@ -635,25 +635,28 @@ def test_two_sensors_are_told_by_the_bias_or_the_noise_of_alternate_rows() -> No
     assert two_sensors(np.repeat([0.0, 1.0], n // 2)) is None  # no noise: no block to compare
 
 
-@pytest.mark.parametrize("jitter", [False, True])
-def test_a_clock_reset_left_in_the_stamps_keeps_the_sample_period(jitter: bool) -> None:
+@pytest.mark.parametrize("latency_ms", [0, 3, 15])
+def test_a_clock_reset_left_in_the_stamps_keeps_the_sample_period(latency_ms: int) -> None:
     """Stamps of a clock reset after row 600 (back by 5000 s) and left as they are (more
     resets than the decoder places): the sample period is that of the steps within the runs,
     not of the end points (before session 40: negative, and an internal error in the fit),
-    and the step jitter is the steps' (with a host's 0-3 ms latency, not 1e8 ppm)."""
+    and the step jitter that of every step but the reset's (a host's 0-3 ms latency; 0-15 ms,
+    whose steps also go back, by less than a period)."""
     rng = np.random.default_rng(4)
 
     def reset(a):
-        if jitter:
-            a += rng.integers(0, 3_000_000, len(a))
+        a += rng.integers(0, latency_ms * 1_000_000 + 1, len(a))
         a[600:] -= 5_000 * 10**9
 
     rec = recording(2000, stamp_ns=reset)
     frames = rec.frames.with_columns(counter=pl.lit(None, dtype=pl.UInt32))  # an Imu topic's
     s = condition(replace(rec, frames=frames, device={}))
-    assert s.tau0_s == pytest.approx(0.01, rel=3e-4 if jitter else 1e-12)
-    if jitter:  # frames kept in order (the envelope's grid), the reset's step not a step
-        assert s.counts["jitter_ppm"] == pytest.approx(3e6 / np.sqrt(6) / 1e7 * 1e6, rel=0.1)
+    assert s.tau0_s == pytest.approx(0.01, rel=2e-3 if latency_ms else 1e-12)
+    if latency_ms:  # frames kept in order (the envelope's grid), the reset's step not a step
+        steps = np.delete(np.diff(rec.frames["t_s"].to_numpy()), 599)
+        expected = np.sqrt(np.mean((steps - s.tau0_s) ** 2)) / s.tau0_s
+        assert s.counts["jitter_ppm"] == round(expected * 1e6)
+        assert expected == pytest.approx(latency_ms / np.sqrt(6) / 10, rel=0.1)
     else:  # the row after the reset masked, the runs joined on the grid
         assert s.counts["non_monotonic_stamps"] == s.counts["masked_samples"] == 1
         assert s.counts["grid_samples"] == 2000
