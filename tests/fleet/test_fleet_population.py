@@ -294,6 +294,7 @@ def test_the_median_range_reaches_fleet_json_and_fleet_md():
     assert rows[2] == (f"{4e-3 * deg:.4g}", "37 %")
     lo, hi = exact.tolerance
     assert lo < 4e-3 < hi
+    assert population_rows([exact])[0][6] == f"[{lo * deg:.4g}, {hi * deg:.4g}]"
     assert _stats_json(exact)["tolerance"] | {"method": None} == {
         "lo": lo, "hi": hi, "coverage": 0.95, "confidence": 0.95, "method": None
     }  # fmt: skip
@@ -316,9 +317,33 @@ def test_fleet_json_with_a_datasheet_and_a_failed_unit_matches_its_schema(tmp_pa
         term_stats("gyro_x", "rate_ramp", "rad/s^2", [UnitTerm("b", None, None, 1e-7)]),
     ]
     failed = UnitOutcome("bad", "bad.mcap", "failed", "not MCAP", None, None, 0.1, "h:1")
+    n = {"value": 1e-4, "lo": 9e-5, "hi": 1.1e-4, "unit": "rad/s/sqrt(Hz)", "reason": None}
+    temp = {"kind": "temperature", "params": {"coefficient": 2e-5}, "error_before": 4.1,
+            "error_after": 1.02}  # fmt: skip
+    report = {
+        "input": {"topic": "/imu", "frames": 360_000, "rate_hz": 100.0, "duration_s": 3600.0},
+        "axes": {
+            "gyro_x": {"sensor": "gyro", "ieee952": {"random_walk": n}},  # no loop run
+            "gyro_y": {  # the loop's terms after an effect are the unit's final ones
+                "sensor": "gyro",
+                "ieee952": {"random_walk": {**n, "value": 3e-4}},
+                "ieee952_after": {"random_walk": n},
+                "effects": [temp],
+            },
+        },
+    }
+    good = UnitOutcome("good", "s3://lot/good.mcap", "ok", None, report, None, 2.5, "h:2")
     curve = {"tau": [1.0], "median": [1e-3], "lo": [float("nan")], "hi": [2e-3], "units": [3]}
     pop = pl.DataFrame({"axis": ["gyro_x"], "unit": ["rad/s"], **curve})
-    doc = json.loads(json.dumps(fleet_json([failed], stats, pop, sheet)))
+    doc = json.loads(json.dumps(fleet_json([failed, good], stats, pop, sheet)))
+    assert doc["units"][1]["input"] == report["input"] and doc["units"][1]["folder"] == "good"
+    assert doc["units"][1]["axes"] == {
+        "gyro_x": {"sensor": "gyro", "terms_after_loop": False, "terms": {"random_walk": n},
+                   "effects": []},
+        "gyro_y": {"sensor": "gyro", "terms_after_loop": True, "terms": {"random_walk": n},
+                   "effects": [temp]},
+    }  # fmt: skip
+    assert doc["units"][0]["axes"] == {} and doc["units"][0]["folder"] is None
     assert schema_errors(doc, schema, schema) == []
     assert doc["population"][0]["datasheet"]["population_pass"] is True
     assert doc["population_adev"]["gyro_x"]["lo"] == [None]  # NaN written as null
