@@ -74,7 +74,9 @@ def test_local_cluster_local_and_s3_units(tmp_path, s3_server, schema_errors):
     s3.put_object(Bucket="fleet", Key="site1/notes.txt", Body=b"not a recording")
 
     out = tmp_path / "fleet"
+    started = time.perf_counter()
     result = run_fleet([str(local), "s3://fleet/site1/"], out, workers=2)
+    assert result.seconds == pytest.approx(time.perf_counter() - started, abs=0.5)
 
     assert [(u.name, u.status, u.source) for u in result.units] == [
         ("unit_a", "ok", str(local)),
