@@ -249,6 +249,10 @@ def _count(y: np.ndarray, differs: Callable[[int], np.ndarray]) -> int:
     return sum(int(np.count_nonzero(differs(i))) for i in range(0, len(y), _SCAN))
 
 
+CLOCK_RESET_S = CLOCK_RESET_NS / 1e9
+"""A stamp step back this long (s) is a reset of the stamping clock (:mod:`imupipe.io.decode`
+places resets by the log time where it can; those left are not steps of the sampling)."""
+
 ALTERNATION_ROWS = 4096
 """Rows of each block whose even and odd rows :func:`two_sensors` compares."""
 ALTERNATION_BLOCKS = 16
@@ -468,7 +472,7 @@ def _step_jitter(t: np.ndarray, mean: float) -> float:
     total, steps = 0.0, 0
     for i in range(0, len(t) - 1, _CHUNK):
         d = np.diff(t[i : i + _CHUNK + 1])
-        d = d[d >= -CLOCK_RESET_NS / 1e9]
+        d = d[d >= -CLOCK_RESET_S]
         total += float(np.sum((d - mean) ** 2))
         steps += len(d)
     return float(np.sqrt(total / steps))
@@ -868,7 +872,7 @@ def _time_and_places(
     row ``last``, whose ratio is the mean sample period, summed over the runs between steps
     back of more than :data:`imupipe.io.decode.CLOCK_RESET_NS` (resets of the stamping clock
     that the log time could not place: across one, the end points' times say nothing)."""
-    resets = first + 1 + np.flatnonzero(np.diff(t[first : last + 1]) < -CLOCK_RESET_NS / 1e9)
+    resets = first + 1 + np.flatnonzero(np.diff(t[first : last + 1]) < -CLOCK_RESET_S)
     pairs = list(zip([first, *resets.tolist()], [*(resets - 1).tolist(), last], strict=True))
     spanned = sum(b - a if place is None else int(place[b] - place[a]) for a, b in pairs)
     return sum(float(t[b] - t[a]) for a, b in pairs), spanned

@@ -582,7 +582,7 @@ def _uses_log_time(steps: dict[str, _Steps], warnings: list[str]) -> bool:
     return False
 
 
-def _placed(steps: dict[str, _Steps]) -> bool:
+def _to_mend(steps: dict[str, _Steps]) -> bool:
     """Whether header stamps are mended (:func:`_placed_after_resets`): they step back by more
     than :data:`CLOCK_RESET_NS` somewhere."""
     return steps["stamp_ns"].resets > 0
@@ -661,27 +661,29 @@ def _advances(steps: _Steps) -> bool:
 
 
 def _placed_after_resets(
-    stamps: np.ndarray, log: np.ndarray, warnings: list[str], place: bool = True
+    cols: dict[str, np.ndarray], steps: dict[str, _Steps], warnings: list[str]
 ) -> np.ndarray:
-    """The header ``stamps`` (ns) mended, a new array: strays replaced by the MCAP ``log``
-    time (:func:`_mended_strays`), then, after 1 to :data:`MAX_CLOCK_RESETS` clock resets (a
-    step back by more than :data:`CLOCK_RESET_NS`), each run moved onto the first run's clock:
-    by the difference of the runs' median ``log - stamps`` (the receive latency, the same on
-    both sides, cancels), the time between the runs then the log time's, a gap like any
-    other; or, where the log time cannot ``place`` them (it resets with the stamps, or does
-    not advance: :func:`_advances`), one sample after the run before (the runs' median step
+    """A channel's header stamps (``cols``' ``stamp_ns``, ns) mended, a new array: strays
+    replaced by the MCAP log time (``log_time_ns``; :func:`_mended_strays`), then, after 1 to
+    :data:`MAX_CLOCK_RESETS` clock resets (a step back by more than :data:`CLOCK_RESET_NS`),
+    each run moved onto the first run's clock: by the difference of the runs' median
+    ``log - stamps`` (the receive latency, the same on both sides, cancels), the time between
+    the runs then the log time's, a gap like any other; or, where the channel's ``steps`` say
+    the log time cannot place them (it resets with the stamps, or does not advance:
+    :func:`_places`), one sample after the run before (the runs' median step
     later: one frame lost, so that no Allan term spans the join).  Either instead of a jump
     back by the clock's age that would shorten the record and raise its rate.  More resets
     are the interleaved clocks of several sensors, or broken stamps: left as they are
     (conditioning names the steps back)."""
-    out = _mended_strays(stamps, log, warnings)
+    log = cols["log_time_ns"]
+    out = _mended_strays(cols["stamp_ns"], log, warnings)
     resets = np.flatnonzero(np.diff(out) < -CLOCK_RESET_NS) + 1
     if not 0 < len(resets) <= MAX_CLOCK_RESETS:
         return out
     edges = [0, *resets.tolist(), len(out)]
     runs = list(itertools.pairwise(edges))
     back = (out[resets - 1] - out[resets]) / 1e9
-    if place:
+    if _places(steps):
         offsets = [_median_ns(log[a:b] - out[a:b]) for a, b in runs]
         for (a, b), offset in zip(runs, offsets, strict=True):
             out[a:b] += offset - offsets[0]
@@ -722,9 +724,8 @@ def _temperature_times(
     temp = temperature.concat()
     if base == "log_time_ns":
         at = temp["log_time_ns"]
-    elif base == "placed_stamp_ns" and _placed(temperature.steps):
-        place = _places(temperature.steps)
-        at = _placed_after_resets(temp["stamp_ns"], temp["log_time_ns"], [], place)
+    elif base == "placed_stamp_ns" and _to_mend(temperature.steps):
+        at = _placed_after_resets(temp, temperature.steps, [])
     else:
         at = temp["stamp_ns"]
     if not len(at):
@@ -827,10 +828,10 @@ class ScannedRecording:
     def _time_base(self, warnings: list[str]) -> str:
         """What the frames are timed on: ``log_time_ns`` when the header stamps are unset or
         broken (:func:`_uses_log_time`, whose warning is added), ``placed_stamp_ns`` after
-        clock resets (:func:`_placed`), else ``stamp_ns``."""
+        clock resets or stray stamps (:func:`_to_mend`), else ``stamp_ns``."""
         if _uses_log_time(self.channel.steps, warnings):
             return "log_time_ns"
-        return "placed_stamp_ns" if _placed(self.channel.steps) else "stamp_ns"
+        return "placed_stamp_ns" if _to_mend(self.channel.steps) else "stamp_ns"
 
     def _raw(self, columns: frozenset[str] | None, base: str | None) -> frozenset[str] | None:
         """The raw columns a spilled channel maps to build ``columns`` on the time ``base``
@@ -864,8 +865,7 @@ class ScannedRecording:
         n = self.rows
         cols = self.channel.concat(self._raw(columns, base))
         if base == "placed_stamp_ns":
-            place = _places(self.channel.steps)
-            cols[base] = _placed_after_resets(cols["stamp_ns"], cols["log_time_ns"], noted, place)
+            cols[base] = _placed_after_resets(cols, self.channel.steps, noted)
         temp_c = None
         if self.temperature is not None and base is not None:  # (warned with t_s, as the
             # spilled source's conditioning reads it without temp_c)
