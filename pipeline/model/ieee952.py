@@ -185,7 +185,9 @@ def _passive_lstsq(
 ) -> np.ndarray:  # pragma: no cover (JIT)
     """Least-squares solution of a[:, passive] z = b by Householder QR (Golub & Van Loan,
     *Matrix Computations*, alg. 5.3.2), zero outside ``passive``; a column numerically dependent
-    on the earlier ones (|r_kk| ≤ 1e-13 ‖a_k‖) gets z = 0."""
+    on the earlier ones (|r_kk| ≤ 1e-13 ‖a_k‖), or beyond the m-th of m rows, gets z = 0.  (Before
+    session 41 more passive columns than rows read r_kk outside the array: no bounds check in
+    compiled code, a garbage solution of ~1e304 now and then.)"""
     m, n = a.shape
     cols = np.empty(n, dtype=np.int64)
     k = 0
@@ -225,7 +227,7 @@ def _passive_lstsq(
             for i in range(m - c):
                 rt[cc, c + i] -= 2.0 * proj * v[i]
     z = np.zeros(n)
-    for c in range(k - 1, -1, -1):
+    for c in range(min(k, m) - 1, -1, -1):  # columns beyond the m-th: dependent, z = 0
         if abs(rt[c, c]) > 1e-13 * np.sqrt(size[c]):
             acc = rt[k, c]
             for cc in range(c + 1, k):

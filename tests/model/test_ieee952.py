@@ -234,6 +234,20 @@ def test_compiled_nnls_matches_scipy_and_kkt():
             assert np.all(np.abs(grad[got > 0]) <= tol) and np.all(grad[got == 0] <= tol)
 
 
+def test_more_passive_columns_than_rows_solve_on_the_first_independent_ones():
+    """Five passive columns of three rows: the first three (independent) solve a z = b
+    exactly, the other two get 0.  Run uncompiled, where numpy checks the bounds: before
+    session 41 the back substitution read r_kk of columns 4 and 5 outside the 3-row array
+    (IndexError here; in compiled code a garbage solution now and then, ~1e304, seen as a flaky
+    ``test_compiled_nnls_matches_scipy_and_kkt``)."""
+    rng = np.random.default_rng(8)
+    a, b = rng.standard_normal((3, 5)), rng.standard_normal(3)
+    z = ieee952._passive_lstsq.py_func(a, b, np.ones(5, bool))
+    assert z[3:].tolist() == [0.0, 0.0]
+    np.testing.assert_allclose(a @ z, b, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ieee952._passive_lstsq(a, b, np.ones(5, bool)), z, atol=1e-12)
+
+
 @pytest.mark.parametrize("guess", [(False, False), (True, False)])
 def test_nnls_stops_at_the_largest_columns_tolerance(guess: tuple[bool, bool]):
     """The KKT tolerance is 10 ε max(m, n) × the largest column's ℓ1 norm (Lawson & Hanson's
