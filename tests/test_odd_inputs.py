@@ -756,24 +756,16 @@ def test_a_reset_the_log_time_cannot_place_joins_the_runs(
         assert n == pytest.approx((1e-3 if axis.startswith("gyro") else 3e-3) / 10, rel=0.03)
 
 
-@pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
-def test_a_temperature_the_host_stamps_still_drives_the_loop(
-    tmp_path: Path, capsys, budget: list[str]
-) -> None:
-    """The IMU stamped by its own clock (from 5 s after power-up), its temperature (1 Hz, a
-    random wander of 1 °C a second) by the host's, both received 2 ms late; gyro_x's bias
-    follows the temperature by 1e-3 rad/s/K. Before session 40 no temperature message fell
-    within the IMU's stamps, so every frame read the last one and the loop could not see the
-    effect. Both are now placed by their log time, in memory and on the low-memory path (whose
-    conditioning says so too), and the loop finds the effect with the coefficient."""
-    n = N
+def write_host_stamped_temperature(path: Path, n: int, wander_c: float, seed: int) -> Path:
+    """A bag of ``n`` frames at 100 Hz, the IMU stamped by its own clock (from 5 s after
+    power-up), its temperature (1 Hz, a random wander of ``wander_c`` °C a second) by the
+    host's, both received 2 ms late; gyro_x's bias follows the temperature by 1e-3 rad/s/K."""
     sensor_ns = 5 * 10**9 + np.arange(n, dtype=np.int64) * 10_000_000
     host_ns = 1_700_000_000_000_000_000 + np.arange(n, dtype=np.int64) * 10_000_000
-    _, gyro, accel = imu_stream()
-    wander = np.cumsum(np.random.default_rng(5).normal(0, 1, n // 100 + 1))  # °C, 1 Hz
+    _, gyro, accel = imu_stream(n)
+    wander = np.cumsum(np.random.default_rng(seed).normal(0, wander_c, n // 100 + 1))  # 1 Hz
     celsius = 25.0 + np.interp(np.arange(n) / 100, np.arange(len(wander)), wander)
     gyro[:, 0] += 1e-3 * (celsius - 25.0)
-    path = tmp_path / "f.mcap"
     with open(path, "wb") as f:
         w = BulkWriter(f, profile="ros2")
         imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
@@ -793,6 +785,20 @@ def test_a_temperature_the_host_stamps_still_drives_the_loop(
                 temperature_payloads(host_ns[each_second], celsius[each_second]),
             )
         w.finish()
+    return path
+
+
+@pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
+def test_a_temperature_the_host_stamps_still_drives_the_loop(
+    tmp_path: Path, capsys, budget: list[str]
+) -> None:
+    """A temperature stamped by the host's clock and an IMU by the sensor's
+    (:func:`write_host_stamped_temperature`, 2 min, a wander of 1 °C a second). Before
+    session 40 no temperature message fell within the IMU's stamps, so every frame read the
+    last one and the loop could not see the effect. Both are now placed by their log time, in
+    memory and on the low-memory path (whose conditioning says so too), and the loop finds the
+    effect with the coefficient."""
+    path = write_host_stamped_temperature(tmp_path / "f.mcap", N, 1.0, 5)
     code, report, err = analyze(path, capsys, "--loop", *budget)
     assert code == 0, err
     assert report["input"]["warnings"][0] == (
@@ -805,6 +811,34 @@ def test_a_temperature_the_host_stamps_still_drives_the_loop(
     (effect,) = [e for e in report["axes"]["gyro_x"]["effects"] if e["kind"] == "temperature"]
     lo, hi = effect["intervals"]["coefficient"]
     assert 0.5e-3 < lo <= 1e-3 <= hi < 2e-3  # (wide: the ramp shares part of the trend)
+
+
+def test_a_fast_temperature_is_corrected_unfiltered(tmp_path: Path, capsys) -> None:
+    """A temperature that wanders 0.2 °C a second (5 min; :func:`write_host_stamped_temperature`)
+    moves within the coupling's low-pass window (31 blocks, 18 s here). Before session 41 the
+    loop corrected only the low-passed level: the wander within the window stayed in the
+    corrected curve, the Allan error rose 0.16 → 2.93 and the coupling was refused ("flags do
+    not clear"), its drift read as a rate random walk K of 1.5e-4 rad/s²/√Hz. The channel's
+    changes are not read noise, so its block means are the level now
+    (``effects.read_noise_dominates``), and the corrected curve takes the change below one block
+    and between block factors (``loop._Axis.corrected_avar``): the coefficient to ±2 %, K
+    unresolved (its truth is 0), both errors fall."""
+    path = write_host_stamped_temperature(tmp_path / "f.mcap", 30_000, 0.2, 2)
+    code, report, err = analyze(path, capsys, "--loop")
+    assert code == 0, err
+    gyro_x = report["axes"]["gyro_x"]
+    (effect,) = gyro_x["effects"]
+    assert effect["kind"] == "temperature"
+    assert effect["params"]["lowpass_s"] == 0.0 and effect["params"]["lag_s"] == 0.0
+    assert effect["params"]["coefficient"] == pytest.approx(1e-3, rel=0.02)
+    lo, hi = effect["intervals"]["coefficient"]
+    assert lo < 1e-3 < hi and hi - lo < 0.05e-3
+    assert gyro_x["ieee952"]["rate_random_walk"]["value"] is None  # unresolved: the truth is 0
+    assert gyro_x["ieee952"]["rate_random_walk"]["hi"] < 2e-5
+    assert gyro_x["ieee952"]["random_walk"]["value"] == pytest.approx(1e-4, rel=0.03)
+    assert effect["error_after"] < effect["error_before"]  # the Allan error
+    assert effect["evidence"]["time_domain_deviance_fall"] > 100
+    assert all(not a["effects"] for axis, a in report["axes"].items() if axis != "gyro_x")
 
 
 def test_an_imu_topic_whose_only_chunk_is_over_the_budget_says_why(

@@ -470,6 +470,18 @@ class SpectralFit:
     def p_value(self) -> float:
         return float(special.chdtrc(len(self.beta), self.chi2))  # chi2.sf
 
+    def log_p_value(self) -> float:
+        """ln :meth:`p_value`, finite where the p-value underflows to 0 (χ² beyond ~1400): there
+        the leading term of the upper incomplete gamma's expansion, Γ(a, x) ~ x^(a−1) e^(−x)
+        (Abramowitz & Stegun 6.5.32; a = k/2, x = χ²/2).  Options are ranked by it: two
+        strong options both at p = 0 were otherwise ranked by their order (measured: a
+        temperature coupling's low-passed level, χ² smaller, chosen over its unfiltered level)."""
+        p = self.p_value()
+        if p > 0:
+            return float(np.log(p))
+        a, x = len(self.beta) / 2, self.chi2 / 2
+        return float((a - 1) * np.log(x) - x - special.gammaln(a))
+
 
 def spectral_fit(
     yw: np.ndarray, xw: np.ndarray, drift: np.ndarray, mask: np.ndarray | None = None
@@ -529,7 +541,7 @@ class Candidate:
                 spectral_fit(yw, whiten(np.column_stack(list(regs.values()))), self._drift(whiten))
                 for regs, _ in self.options
             ]
-            best = int(np.argmin([f.p_value() for f in fits]))
+            best = int(np.argmin([f.log_p_value() for f in fits]))
             regs, fixed = self.options[best]
             self.regressors = np.column_stack(list(regs.values()))
             self.names = tuple(regs)
@@ -634,27 +646,61 @@ def grid_interval(grid: np.ndarray, room: np.ndarray) -> list[float]:
 def coupling_candidate(
     kind: str, y_d: np.ndarray, aux_d: np.ndarray | None, dt: float, unit: str, whiten: Whitener
 ) -> Candidate | None:
-    """Coupling to an auxiliary channel: level (and rate) of the low-passed channel, with lag.
+    """Coupling to an auxiliary channel: its level (and rate), with lag.
 
     Options: lags :data:`LAGS_S` (channel leading) × {level} or {level, d/dt}; the best by
-    spectral-GLS p-value is kept, Bonferroni-adjusted for the 6 options.
+    spectral-GLS p-value is kept, Bonferroni-adjusted for the 6 options.  The level is the
+    channel's block means low-passed over :data:`LOWPASS_BLOCKS` blocks where their changes
+    are mostly read noise or quantisation (:func:`read_noise_dominates`: the ADIS TEMP and
+    SUPPLY words are coarsely quantised), else the block means themselves (param ``lowpass_s``: the
+    window, s; 0 unfiltered).  The choice reads the channel only, so it costs no test.  A
+    channel that moves within the window needs its own level: a temperature random-walking
+    0.2 °C/√s at 1 Hz drove a gyro's bias by 1e-3 rad/s/K (5 min at 100 Hz, blocks 0.58 s);
+    the low-passed level left its wander within the 18 s window in the corrected curve
+    (Allan error 0.16 → 2.93, refused: its drift was read as a rate random walk;
+    ``tests/test_odd_inputs.py::test_a_fast_temperature_is_corrected_unfiltered``).  Offering
+    both levels instead cost a weak coupling its significance (family p × 9/6: 7.9e-4 → 1.2e-3
+    under K's bound, ``tests/model/test_loop_sim.py::test_temperature_coupling`` seed 17).
     """
     if aux_d is None or np.ptp(aux_d) == 0:
         return None
-    lp = moving_average(aux_d, LOWPASS_BLOCKS)
-    rate = np.gradient(lp, dt)
+    filtered = read_noise_dominates(aux_d)
+    level = moving_average(aux_d, LOWPASS_BLOCKS) if filtered else aux_d
+    rate = np.gradient(level, dt)
+    lowpass_s = LOWPASS_BLOCKS * dt if filtered else 0.0
     options = []
     for lag_s in LAGS_S:
         k = round(lag_s / dt)
         if k >= len(y_d) // 4:
             continue
-        shift = np.concatenate([np.full(k, lp[0]), lp[: len(lp) - k]])
+        shift = np.concatenate([np.full(k, level[0]), level[: len(level) - k]])
         dshift = np.concatenate([np.full(k, rate[0]), rate[: len(rate) - k]])
-        options.append(({"coefficient": shift}, {"lag_s": lag_s}))
-        options.append(({"coefficient": shift, "coefficient_rate": dshift}, {"lag_s": lag_s}))
+        fixed = {"lag_s": lag_s, "lowpass_s": lowpass_s}
+        options.append(({"coefficient": shift}, fixed))
+        options.append(({"coefficient": shift, "coefficient_rate": dshift}, fixed))
     cand = _best_option(kind, y_d, whiten, options)
     cand.evidence["unit"] = f"rate per {unit} (coefficient_rate: per {unit}/s)"
     return cand
+
+
+def read_noise_dominates(x: np.ndarray) -> bool:
+    """Whether a channel's block-to-block changes (``x``: its block means) are mostly read
+    noise or quantisation rather than its motion — then a coupling low-passes it.
+
+    Read noise: −2 ρ₁ of the successive differences is at least ½ (white noise w adds 2σ_w²
+    to their variance and −σ_w² to their lag-1 covariance: ρ₁ = −½; a random walk's
+    differences are uncorrelated, a smooth signal's positively correlated).  Quantisation:
+    at least half the differences are 0 — a channel that moves less than one LSB a block
+    reads as a staircase, whose error is a sawtooth as slow as its steps (the simulator's
+    lab warming 2.5 °C in 30 min through 0.136 °C LSBs: steps every ~100 s; its block means
+    as the level cost a weak coupling its significance, family p under K's bound 7.9e-4 →
+    3.8e-3, ``tests/model/test_loop_sim.py::test_temperature_coupling`` seed 17)."""
+    d = np.diff(x)
+    if d.size < 2 or np.mean(d == 0) >= 0.5:
+        return True
+    d = d - d.mean()
+    var = float(d @ d)
+    return not var > 0 or -2 * float(d[1:] @ d[:-1]) / var >= 0.5
 
 
 def _slope(y: np.ndarray, x: np.ndarray) -> float:

@@ -5,7 +5,8 @@ The record is gyro_y of the independent generator's recording 700011 (2 h at 100
 a Gauss–Markov effect on gyro_z; ``benchmarks/independent_generator.py``, which shares no code
 with imupipe) with the generator's lab temperature: B and K are unresolved there, the fitted
 PSD is white at low frequency, and the loop accepted a temperature coupling on this clean axis
-(family p 3.6e-6 under the fitted PSD).  Under K's bound its p is 0.285."""
+(family p 3.6e-6 under the fitted PSD).  Under K's bound its p is 0.243 (0.285 with the
+level low-passed, before session 41: the generator's temperature is not quantised)."""
 
 from __future__ import annotations
 
@@ -50,7 +51,7 @@ def test_a_wander_that_follows_the_temperature_is_not_a_coupling(record) -> None
     assert loop.accepted == []
     assert cand.evidence["p_value_family"] < ALPHA  # the fitted PSD alone accepted it
     assert cand.evidence["allan_error_fall_chi2"] < 3.84
-    assert cand.evidence["p_value_family_k_bound"] == pytest.approx(0.285, rel=0.05)
+    assert cand.evidence["p_value_family_k_bound"] == pytest.approx(0.243, rel=0.05)
     assert "with K at its 0.68 upper bound" in cand.reason
 
 

@@ -616,6 +616,55 @@ def test_options_searched_are_counted_in_the_evidence():
         assert 0 < cand.evidence["p_value_bonferroni"] == cand.p_value <= 1
 
 
+@pytest.mark.parametrize(
+    ("channel", "dominates"),
+    [
+        ("white", True),  # read noise alone: ρ₁ of the differences −½
+        ("walk_plus_half_noise", True),  # a walk whose read noise is 1.2× its step: share 0.74
+        ("walk_plus_little_noise", False),  # the same walk with 0.5× its step: share 0.33
+        ("walk", False),
+        ("staircase", True),  # a slow warming through 0.136 °C LSBs: 90 % of blocks equal
+        ("interpolated_walk", False),  # 1 Hz values linearly interpolated, 0.25 s blocks
+        ("ramp", True),  # equal differences: nothing to tell, low-passing costs nothing
+    ],
+)
+def test_read_noise_dominates(channel: str, dominates: bool) -> None:
+    rng = np.random.default_rng(4)
+    n = 4000
+    walk = np.cumsum(rng.standard_normal(n))
+    x = {
+        "white": rng.standard_normal(n),
+        "walk_plus_half_noise": walk + 1.2 * rng.standard_normal(n),
+        "walk_plus_little_noise": walk + 0.5 * rng.standard_normal(n),
+        "walk": walk,
+        "staircase": np.round((25 + np.arange(n) * 0.0136 / 10) / 0.136) * 0.136,
+        "interpolated_walk": np.interp(np.arange(n) / 4, np.arange(n // 4 + 1), walk[: n // 4 + 1]),
+        "ramp": np.arange(n) * 0.01,
+    }[channel]
+    assert effects.read_noise_dominates(x) is dominates
+
+
+@pytest.mark.parametrize(("quantised", "lowpass_s"), [(True, 31.0), (False, 0.0)])
+def test_a_coupling_low_passes_only_a_channel_its_read_noise_dominates(
+    quantised: bool, lowpass_s: float
+) -> None:
+    """The coupling's level: the channel low-passed over 31 blocks where its changes are read
+    noise or quantisation, else its block means; the regressor the candidate corrects with
+    is that level (lag 0 here), scaled by the coefficient."""
+    rng = np.random.default_rng(5)
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 1.0)
+    walk = np.cumsum(rng.standard_normal(N_D))
+    aux = np.round(walk / 4) * 4 if quantised else walk  # coarse LSBs: mostly equal blocks
+    y = 0.5 * walk + rng.standard_normal(N_D)
+    cand = effects.coupling_candidate("temperature", y, aux, 1.0, "degC", whiten)
+    assert cand.params["lowpass_s"] == lowpass_s and cand.params["lag_s"] == 0.0
+    level = effects.moving_average(aux, 31) if quantised else aux
+    assert cand.regressors[:, 0] == pytest.approx(level, abs=1e-12)
+    g = cand.regressors @ [cand.params[k] for k in cand.names]
+    assert cand.correction == pytest.approx(g - g.mean(), abs=1e-12)
+    assert cand.params["coefficient"] == pytest.approx(0.5, rel=0.1)
+
+
 # --------------------------------------------------------------------------------------------
 # close_loop end to end: 3.6 h at 10 Hz of white + flicker noise (the paper's gyro) plus one
 # effect, seed 11; the cases are tuned (see the module doc)

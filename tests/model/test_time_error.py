@@ -21,7 +21,7 @@ from imupipe.model.loop import (
     close_loop,
     time_domain_fit,
 )
-from imupipe.stats.allan import allan_curves
+from imupipe.stats.allan import allan_curves, oadev
 
 TAU0, N = 0.1, 2**17  # 3.6 h at 10 Hz
 N_WHITE, B_FLICKER = 3e-4, 5e-5  # rad/s/sqrt(Hz), rad/s
@@ -150,11 +150,12 @@ def test_time_fit_log_det_is_that_of_the_coarse_differences_covariance() -> None
     assert 0.9 < found.error < 1.1
 
 
-def test_a_tau_without_decimated_terms_keeps_its_measured_allan_value() -> None:
-    """At the longest τ the full-rate curve can hold a term where the 1 s blocks hold none: a
+def test_a_tau_whose_upper_block_factor_has_no_term_takes_the_lower_ones_change() -> None:
+    """At the longest τ the full-rate curve can hold a term where the 1 s blocks hold fewer: a
     clean run of 50 240 samples that starts mid-block has a τ = 2511.9 s term, its 5023 whole
-    blocks none.  A slow correction changes the Allan value only where the blocks measure the
-    change; that τ keeps its measured value."""
+    blocks one term at 2511 blocks and none at 2512.  A slow correction changes the Allan
+    value where the blocks measure the change: that τ takes the 2511-block change alone (not
+    interpolated toward a change of 0)."""
     y = noise(5)
     excluded = np.zeros(N, bool)
     excluded[:5] = excluded[50_245:90_000] = True
@@ -165,7 +166,13 @@ def test_a_tau_without_decimated_terms_keeps_its_measured_allan_value() -> None:
     state = _State(ax.avar, ax.y_d.copy(), None)
     step = np.where(np.arange(len(ax.y_d)) >= 2_000, 3e-4, 0.0)  # on observed blocks
     after = ax.corrected_avar(state, effects.Candidate("bias_step", {}, {}, correction=step))
-    assert after[-1] == state.avar[-1]
+    m = np.array([2511])
+    change = (
+        oadev(ax.y_d - step, ax.dt, m, excluded=ax.excluded_d)[0] ** 2
+        - oadev(ax.y_d, ax.dt, m, excluded=ax.excluded_d)[0] ** 2
+    )
+    assert np.isfinite(change[0]) and change[0] != 0
+    assert after[-1] == pytest.approx(state.avar[-1] + change[0], rel=1e-12)
     assert np.max(np.abs(after[:-1] / state.avar[:-1] - 1)) > 0.1  # elsewhere it does change
 
 
