@@ -62,9 +62,13 @@ ENVELOPE_ROWS = 64
 """Jittery stamps without a frame counter: rows per block whose low quantile of lateness (the
 stamp minus its place on a uniform grid) tells the block's level; a lost frame raises the level
 of every later block by one period."""
-ENVELOPE_QUANTILE = 0.1
+ENVELOPE_QUANTILE = 0.04
 """The quantile of a block's lateness that is its level: below the late tail (a stamp held up by
-the host, the later samples of a burst) and above the few stamps that came early."""
+the host, the later samples of a burst) and above the few stamps that came early.  0.04 of 64
+rows lies between the 3rd and 4th lowest, so a block holding 4 bursts' last samples (bursts of
+up to :data:`BURST_ROWS`) reads their level; at 0.1 (the 7th–8th lowest, before session 41)
+bursts of 10 put 6 or 7 ends in a block and its level jumped a period between blocks: 7 frames
+"lost" in 5 min at 200 Hz that were all there."""
 DRIFT_BLOCKS = 32
 """Blocks either side whose median level change is the clock's drift (the host's and the
 sensor's clocks differ by ppm; a rate drifting by a few % in a slow host timer), told apart
@@ -584,6 +588,11 @@ def _envelope_places(t: np.ndarray, period: float) -> np.ndarray:
     n, w = len(t), ENVELOPE_ROWS
     if n <= w:
         return np.arange(n, dtype=np.int64)
+    drift = _drift(_block_levels(t, period))
+    # the period the stamps keep on the whole: the spans' median is off by up to a burst a span
+    # for bursts whose length does not divide SPAN_ROWS (bursts of 7: 0.8 %, a 5 s gap of 1000
+    # frames counted 1008)
+    period *= 1 + float(np.median(drift)) / w
     drift = _drift(_block_levels(t, period))
     levels = _block_levels(t, period, drift)
     step = np.diff(levels) - _drift(levels)[:-1]

@@ -46,7 +46,7 @@ def stamped(kind: str, frame: np.ndarray, seed: int = 0) -> np.ndarray:
     elif kind == "gauss":  # a time filter's symmetric error, 30 % of a period
         t = t + rng.normal(0, 0.3 * PERIOD_NS, len(t))
     elif kind.startswith("burst"):  # every `size` samples arrive together, stamped on arrival
-        size = int(kind[-1])
+        size = int(kind.removeprefix("burst"))
         bursts = frame // size
         arrival = (bursts + 1) * size * PERIOD_NS * (1 + 30e-6)
         t = arrival + rng.uniform(0, 0.3 * PERIOD_NS, bursts[-1] + 1)[bursts]
@@ -91,17 +91,23 @@ def test_receive_times_keep_every_frame_in_order() -> None:
     assert not any("duplicate stamp(s)" in w for w in s.warnings)
 
 
-@pytest.mark.parametrize("kind", ["burst2", "burst3", "latency", "gauss"])
+@pytest.mark.parametrize(
+    "kind", ["burst2", "burst3", "burst7", "burst10", "burst16", "latency", "gauss"]
+)
 def test_lost_frames_are_found_and_placed_among_jittery_stamps(kind: str) -> None:
     """One frame, three and a thousand lost: each gap counted with its frames and the rows on
     the true grid, but for the few rows at a gap's edge whose place their stamps cannot tell
-    (the last samples of a burst before a lost frame)."""
+    (the last samples of a burst before a lost frame). Bursts of 2 to 16 (a USB serial
+    adapter's 16 ms latency timer at 1 kHz): before session 41, bursts of 7 counted the 5 s
+    gap as 1008 frames (the spans' median period 0.8 % off) and bursts of 10 found 2 gaps
+    that were not there (the blocks' level jumped with their count of bursts' ends)."""
     frame = received(100_000)
     s = condition(imu_recording(stamped(kind, frame)), gaps="mask")
     assert (s.counts["gaps"], s.counts["missed_frames"]) == (3, 1004)
     assert s.samples == frame[-1] - frame[0] + 1
     wrong = np.flatnonzero(s.grid_index != frame - frame[0])
-    assert wrong.size <= 10, wrong
+    edge = max(int(kind.removeprefix("burst")) - 1, 3) if kind.startswith("burst") else 3
+    assert wrong.size <= len(LOST) * edge, wrong  # at most a burst's rows but one, a gap
     assert all(any(abs(w - (first - 1)) <= 16 for first, _ in LOST) for w in wrong)
     assert s.tau0_s == pytest.approx(PERIOD_NS * 1e-9 * (1 + 30e-6), rel=1e-3)
 
