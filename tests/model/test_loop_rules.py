@@ -36,7 +36,7 @@ from functools import cache
 
 import numpy as np
 import pytest
-from scipy import optimize, stats
+from scipy import optimize, special, stats
 
 from imupipe.model import effects, ieee952
 from imupipe.model.loop import (
@@ -663,6 +663,31 @@ def test_a_coupling_low_passes_only_a_channel_its_read_noise_dominates(
     g = cand.regressors @ [cand.params[k] for k in cand.names]
     assert cand.correction == pytest.approx(g - g.mean(), abs=1e-12)
     assert cand.params["coefficient"] == pytest.approx(0.5, rel=0.1)
+
+
+def test_a_coupling_leads_by_its_lag_in_seconds() -> None:
+    """A channel leading the rate by 60 s on blocks of 0.5 s: the lag-60 option shifts it by
+    120 blocks, and is the one chosen, with the coefficient."""
+    rng = np.random.default_rng(6)
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 0.5)
+    walk = np.cumsum(rng.standard_normal(N_D))
+    y = 0.5 * np.concatenate([np.full(120, walk[0]), walk[:-120]]) + rng.standard_normal(N_D)
+    cand = effects.coupling_candidate("temperature", y, walk, 0.5, "degC", whiten)
+    assert cand.params["lag_s"] == 60.0
+    assert cand.params["coefficient"] == pytest.approx(0.5, rel=0.02)
+
+
+@pytest.mark.parametrize("k", [1, 2])
+@pytest.mark.parametrize("chi2", [1000.0, 1600.0, 5000.0])
+def test_log_p_value_holds_where_the_p_value_underflows(k: int, chi2: float) -> None:
+    """ln of the χ² survival function with k dof: exact while the p-value is a float (χ² 1000),
+    the leading term of its expansion beyond (1600, 5000: p underflows to 0), within
+    (a − 1)/x of scipy's log survival function."""
+    fit = effects.SpectralFit(np.zeros(k), np.eye(k), chi2, 1.0)
+    # exact: k = 1, sf = erfc(√(χ²/2)) = 2 Φ(−√χ²); k = 2, sf = exp(−χ²/2)
+    want = np.log(2) + special.log_ndtr(-np.sqrt(chi2)) if k == 1 else -chi2 / 2
+    assert fit.log_p_value() == pytest.approx(want, abs=1e-9 if chi2 < 1400 else 1e-3)
+    assert (fit.p_value() == 0) is (chi2 > 1400)
 
 
 # --------------------------------------------------------------------------------------------
