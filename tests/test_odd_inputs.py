@@ -36,6 +36,7 @@ from imupipe.device.frame_schema import (
     message_definition,
 )
 from imupipe.io import mcap_scan
+from imupipe.io.decode import decode
 from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.recording.recorder import FrameWriter
 from imupipe.recording.simulator import VirtualADIS16364
@@ -558,8 +559,6 @@ def test_a_ros1_bag_is_named_and_its_conversion_reads_bit_for_bit(tmp_path: Path
     from rosbags.rosbag1 import Writer as Ros1Writer
     from rosbags.typesys import Stores, get_typestore
 
-    from imupipe.io.decode import decode
-
     store = get_typestore(Stores.ROS1_NOETIC)
     types = store.types
     stamps, gyro, accel = imu_stream(3000, seed=3)
@@ -839,6 +838,51 @@ def test_a_fast_temperature_is_corrected_unfiltered(tmp_path: Path, capsys) -> N
     assert effect["error_after"] < effect["error_before"]  # the Allan error
     assert effect["evidence"]["time_domain_deviance_fall"] > 100
     assert all(not a["effects"] for axis, a in report["axes"].items() if axis != "gyro_x")
+
+
+@pytest.mark.parametrize("bad", ["nan", "inf", "every"])
+def test_temperature_messages_that_are_not_numbers_are_left_out(
+    tmp_path: Path, capsys, bad: str
+) -> None:
+    """A driver publishing NaN (or inf) for a temperature it cannot read: those messages are
+    left out and the temperature interpolated between the others, with a warning; all of them
+    such, the temperature is not used. Before session 41 one infinite message stopped the
+    analysis ("internal error: LinAlgError: SVD did not converge" in the loop's regression)
+    and each NaN one spread over the frames around it."""
+    n = 12_000
+    stamps, gyro, accel = imu_stream(n)
+    celsius = 25.0 + np.arange(n // 100) * 0.01  # 1 Hz
+    sent = celsius.copy()
+    dropped = {"nan": [7, 8, 50], "inf": [30], "every": list(range(n // 100))}[bad]
+    sent[dropped] = np.nan if bad != "inf" else np.inf
+    path = tmp_path / "f.mcap"
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        temp_schema = w.register_schema("sensor_msgs/msg/Temperature", "ros2msg", b"")
+        temp = w.register_channel("/imu/temperature", "cdr", temp_schema)
+        w.write_chunk(imu, stamps, imu_payloads(stamps, gyro, accel))
+        w.write_chunk(temp, stamps[::100], temperature_payloads(stamps[::100], sent))
+        w.finish()
+    rec = decode(path)
+    said = [w for w in rec.warnings if "NaN or infinite" in w]
+    if bad == "every":
+        assert said == [
+            "120 of the temperature topic's 120 message(s) are NaN or infinite: the temperature "
+            "is not used"
+        ]
+        assert rec.frames["temp_c"].null_count() == n or rec.frames["temp_c"].is_nan().all()
+    else:
+        assert said == [
+            f"{len(dropped)} of the temperature topic's 120 message(s) are NaN or infinite: "
+            "left out, the temperature interpolated between the others"
+        ]
+        good = np.setdiff1d(np.arange(n // 100), dropped)
+        want = np.interp(np.arange(n), good * 100, celsius[good])
+        np.testing.assert_allclose(rec.frames["temp_c"].to_numpy(), want, rtol=0, atol=1e-9)
+    code, report, err = analyze(path, capsys, "--loop")
+    assert code == 0, err
+    assert said[0] in report["input"]["warnings"]
 
 
 def test_an_imu_topic_whose_only_chunk_is_over_the_budget_says_why(

@@ -720,7 +720,10 @@ def _temperature_times(
     (their log time; or their stamps, placed after their own clock resets as the IMU's are).
     When none of its messages falls within the frames' span (stamped by another clock: the
     host's, the IMU by the sensor's), both are their log times (``log``, the IMU's, if kept),
-    with a warning; None, with a warning, if that does not help either, or without messages."""
+    with a warning; None, with a warning, if that does not help either, or without messages.
+    Messages whose temperature is NaN or infinite (a driver's "not available") are left out,
+    with a warning (before session 41 an infinite one stopped the analysis with an internal
+    error in the loop's regression; NaN ones spread over the frames around them)."""
     temp = temperature.concat()
     if base == "log_time_ns":
         at = temp["log_time_ns"]
@@ -728,11 +731,21 @@ def _temperature_times(
         at = _placed_after_resets(temp, temperature.steps, [])
     else:
         at = temp["stamp_ns"]
+    celsius, logged = temp["temp_c"], temp["log_time_ns"]
+    finite = np.isfinite(celsius)
+    if not finite.all():
+        bad = len(celsius) - int(np.count_nonzero(finite))
+        warnings.append(
+            f"{bad} of the temperature topic's {len(celsius)} message(s) are NaN or infinite: "
+            + ("left out, the temperature interpolated between the others" if finite.any()
+               else "the temperature is not used")
+        )  # fmt: skip
+        at, celsius, logged = at[finite], celsius[finite], logged[finite]
     if not len(at):
         return None
     if not _overlaps(at, x):
         clock = "log time" if base == "log_time_ns" else "header.stamp"
-        if log is None or base == "log_time_ns" or not _overlaps(temp["log_time_ns"], log):
+        if log is None or base == "log_time_ns" or not _overlaps(logged, log):
             warnings.append(
                 f"the temperature topic's {len(at)} message(s) are stamped outside the IMU's "
                 f"time span ({clock}: another clock?): the temperature is not used"
@@ -742,8 +755,8 @@ def _temperature_times(
             f"the temperature topic's {len(at)} message(s) are stamped outside the IMU's time "
             f"span ({clock}: another clock?): it is placed by the MCAP log time"
         )
-        x, at = log, temp["log_time_ns"]
-    return x, at, temp["temp_c"]
+        x, at = log, logged
+    return x, at, celsius
 
 
 def _temperature(times: tuple[np.ndarray, np.ndarray, np.ndarray], out: np.ndarray) -> np.ndarray:
