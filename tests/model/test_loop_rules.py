@@ -626,6 +626,7 @@ def test_options_searched_are_counted_in_the_evidence():
         ("staircase", True),  # a slow warming through 0.136 °C LSBs: 90 % of blocks equal
         ("interpolated_walk", False),  # 1 Hz values linearly interpolated, 0.25 s blocks
         ("ramp", True),  # equal differences: nothing to tell, low-passing costs nothing
+        ("half_still", True),  # moves every other pair of blocks: half its differences 0
     ],
 )
 def test_read_noise_dominates(channel: str, dominates: bool) -> None:
@@ -640,23 +641,24 @@ def test_read_noise_dominates(channel: str, dominates: bool) -> None:
         "staircase": np.round((25 + np.arange(n) * 0.0136 / 10) / 0.136) * 0.136,
         "interpolated_walk": np.interp(np.arange(n) / 4, np.arange(n // 4 + 1), walk[: n // 4 + 1]),
         "ramp": np.arange(n) * 0.01,
+        "half_still": np.cumsum(np.tile([1.0, 1.0, 0.0, 0.0], n // 4)),  # ρ₁ 0: no read noise
     }[channel]
     assert effects.read_noise_dominates(x) is dominates
 
 
-@pytest.mark.parametrize(("quantised", "lowpass_s"), [(True, 31.0), (False, 0.0)])
+@pytest.mark.parametrize(("quantised", "lowpass_s"), [(True, 15.5), (False, 0.0)])
 def test_a_coupling_low_passes_only_a_channel_its_read_noise_dominates(
     quantised: bool, lowpass_s: float
 ) -> None:
-    """The coupling's level: the channel low-passed over 31 blocks where its changes are read
-    noise or quantisation, else its block means; the regressor the candidate corrects with
-    is that level (lag 0 here), scaled by the coefficient."""
+    """The coupling's level: the channel low-passed over 31 blocks (of 0.5 s: 15.5 s) where its
+    changes are read noise or quantisation, else its block means; the regressor the candidate
+    corrects with is that level (lag 0 here), scaled by the coefficient."""
     rng = np.random.default_rng(5)
-    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 1.0)
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 0.5)
     walk = np.cumsum(rng.standard_normal(N_D))
     aux = np.round(walk / 4) * 4 if quantised else walk  # coarse LSBs: mostly equal blocks
     y = 0.5 * walk + rng.standard_normal(N_D)
-    cand = effects.coupling_candidate("temperature", y, aux, 1.0, "degC", whiten)
+    cand = effects.coupling_candidate("temperature", y, aux, 0.5, "degC", whiten)
     assert cand.params["lowpass_s"] == lowpass_s and cand.params["lag_s"] == 0.0
     level = effects.moving_average(aux, 31) if quantised else aux
     assert cand.regressors[:, 0] == pytest.approx(level, abs=1e-12)
