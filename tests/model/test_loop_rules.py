@@ -641,7 +641,7 @@ def test_read_noise_dominates(channel: str, dominates: bool) -> None:
         "staircase": np.round((25 + np.arange(n) * 0.0136 / 10) / 0.136) * 0.136,
         "interpolated_walk": np.interp(np.arange(n) / 4, np.arange(n // 4 + 1), walk[: n // 4 + 1]),
         "ramp": np.arange(n) * 0.01,
-        "half_still": np.cumsum(np.tile([1.0, 1.0, 0.0, 0.0], n // 4)),  # ρ₁ 0: no read noise
+        "half_still": np.cumsum(np.tile([0.0, 1.0, 1.0, 0.0], n // 4 + 1)[: n + 1]),  # ρ₁ ~0
     }[channel]
     assert effects.read_noise_dominates(x) is dominates
 
