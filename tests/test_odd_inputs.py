@@ -840,6 +840,49 @@ def test_a_fast_temperature_is_corrected_unfiltered(tmp_path: Path, capsys) -> N
     assert all(not a["effects"] for axis, a in report["axes"].items() if axis != "gyro_x")
 
 
+@pytest.mark.parametrize("curvature", [0.0, 3e-5])
+def test_a_curved_temperature_coupling(tmp_path: Path, capsys, curvature: float) -> None:
+    """gyro_x's bias 1e-4 (T − 25) + c₂ (T − 25)² rad/s while the lab cycles 25 ± 3 °C every
+    20 min (30 min at 100 Hz; the temperature at 1 Hz to 0.01 °C): with c₂ = 3e-5 rad/s/°C²
+    the coupling is found with its curvature, each coefficient's interval holding the truth
+    (the linear one as the slope at the reference level), and B stays unresolved (the truth
+    is white noise alone). Before session 41 the linear coupling alone was found and the
+    curvature it left was read as a bias instability B of 1.45e-4 rad/s (on 2 h). Without
+    curvature the linear option is chosen."""
+    n = 180_000
+    stamps, gyro, accel = imu_stream(n, seed=3)
+    celsius = 25 + 3 * np.sin(2 * np.pi * np.arange(n) / 100 / 1200 + 0.3)
+    gyro[:, 0] += 1e-4 * (celsius - 25) + curvature * (celsius - 25) ** 2
+    path = tmp_path / "f.mcap"
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        temp_schema = w.register_schema("sensor_msgs/msg/Temperature", "ros2msg", b"")
+        temp = w.register_channel("/imu/temperature", "cdr", temp_schema)
+        w.write_chunk(imu, stamps, imu_payloads(stamps, gyro, accel))
+        each = slice(0, n, 100)
+        w.write_chunk(
+            temp, stamps[each], temperature_payloads(stamps[each], np.round(celsius[each], 2))
+        )
+        w.finish()
+    code, report, err = analyze(path, capsys, "--loop")
+    assert code == 0, err
+    gyro_x = report["axes"]["gyro_x"]
+    (effect,) = gyro_x["effects"]
+    assert effect["kind"] == "temperature" and effect["params"]["lag_s"] == 0.0
+    if curvature:
+        params, intervals = effect["params"], effect["intervals"]
+        slope = 1e-4 + 2 * curvature * (params["reference_level"] - 25)
+        lo, hi = intervals["coefficient"]
+        assert lo < slope < hi and hi - lo < 0.2 * slope
+        lo, hi = intervals["coefficient_quadratic"]
+        assert lo < curvature < hi and hi - lo < 0.2 * curvature
+    else:
+        assert set(effect["params"]) == {"lag_s", "lowpass_s", "coefficient"}
+    assert gyro_x["ieee952"]["bias_instability"]["value"] is None
+    assert all(not a["effects"] for axis, a in report["axes"].items() if axis != "gyro_x")
+
+
 @pytest.mark.parametrize("bad", ["nan", "inf", "every"])
 def test_temperature_messages_that_are_not_numbers_are_left_out(
     tmp_path: Path, capsys, bad: str

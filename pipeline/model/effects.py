@@ -648,8 +648,15 @@ def coupling_candidate(
 ) -> Candidate | None:
     """Coupling to an auxiliary channel: its level (and rate), with lag.
 
-    Options: lags :data:`LAGS_S` (channel leading) × {level} or {level, d/dt}; the best by
-    spectral-GLS p-value is kept, Bonferroni-adjusted for the 6 options.  The level is the
+    Options: lags :data:`LAGS_S` (channel leading) × {level} or {level, d/dt}, and at lag 0
+    {level, (level − its mean)²}; the best by spectral-GLS p-value is kept, Bonferroni-adjusted
+    for the 7 options.  The curvature: a MEMS bias is a polynomial in temperature, and over a
+    lab's ±3 °C a curvature of 3e-5 rad/s/°C² (on 1e-4 rad/s/°C) left a linear coupling's
+    correction a residual the noise model read as a bias instability B of 1.45e-4 rad/s
+    (truth 0; 2 h at 100 Hz, ``tests/test_odd_inputs.py::test_a_curved_temperature_coupling``).
+    Only at lag 0, the sensor's own temperature: the option costs every coupling's test a
+    Bonferroni factor 7/6 (all lags: 9/6, which lost the weak coupling of
+    ``tests/model/test_loop_sim.py::test_temperature_coupling`` seed 17).  The level is the
     channel's block means low-passed over :data:`LOWPASS_BLOCKS` blocks where their changes
     are mostly read noise or quantisation (:func:`read_noise_dominates`: the ADIS TEMP and
     SUPPLY words are coarsely quantised), else the block means themselves (param ``lowpass_s``: the
@@ -661,6 +668,7 @@ def coupling_candidate(
     ``tests/test_odd_inputs.py::test_a_fast_temperature_is_corrected_unfiltered``).  Offering
     both levels instead cost a weak coupling its significance (family p × 9/6: 7.9e-4 → 1.2e-3
     under K's bound, ``tests/model/test_loop_sim.py::test_temperature_coupling`` seed 17).
+    Params ``reference_level`` (the curvature's centre) with ``coefficient_quadratic``.
     """
     if aux_d is None or np.ptp(aux_d) == 0:
         return None
@@ -678,8 +686,14 @@ def coupling_candidate(
         fixed = {"lag_s": lag_s, "lowpass_s": lowpass_s}
         options.append(({"coefficient": shift}, fixed))
         options.append(({"coefficient": shift, "coefficient_rate": dshift}, fixed))
+    reference = float(level.mean())
+    curved = {"coefficient": level, "coefficient_quadratic": (level - reference) ** 2}
+    options.append((curved, {"lag_s": 0.0, "lowpass_s": lowpass_s, "reference_level": reference}))
     cand = _best_option(kind, y_d, whiten, options)
-    cand.evidence["unit"] = f"rate per {unit} (coefficient_rate: per {unit}/s)"
+    cand.evidence["unit"] = (
+        f"rate per {unit} (coefficient_rate: per {unit}/s; coefficient_quadratic: per {unit}² "
+        f"of the level's departure from reference_level, {unit})"
+    )
     return cand
 
 

@@ -596,8 +596,9 @@ def test_profile_interval_over_options_is_the_union_within_chi2():
 
 def test_options_searched_are_counted_in_the_evidence():
     """Bonferroni factor (``n_options``) and parameter count (ΔBIC's k) of the time-domain
-    candidates: coupling 3 lags × {level, level + rate} = 6 options, k = 2 coefficients + the
-    choice; warm-up 24 τw, k = amplitude + τw; a step k = size + time."""
+    candidates: coupling 3 lags × {level, level + rate} and {level, its square} at lag 0 = 7
+    options, k = 2 coefficients + the choice; warm-up 24 τw, k = amplitude + τw; a step k =
+    size + time."""
     rng = np.random.default_rng(3)
     whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 1.0)
     y = rng.standard_normal(N_D)
@@ -605,7 +606,7 @@ def test_options_searched_are_counted_in_the_evidence():
     coupling = effects.coupling_candidate("temperature", y, aux, 1.0, "degC", whiten)
     warmup = effects.warmup_candidate(y, 1.0, whiten)
     step = effects.step_candidate(y, 1.0, whiten)
-    assert (coupling.n_options, coupling.n_params) == (6, 3)
+    assert (coupling.n_options, coupling.n_params) == (7, 3)
     assert (warmup.n_options, warmup.n_params) == (24, 2)
     assert step.n_params == 2
     # τw is profiled over its options (one column each); a coupling's lag has no interval
@@ -841,7 +842,7 @@ def test_temperature_coupling_significant_only_under_the_fitted_psd_is_rejected(
 
 
 def test_temperature_coupling_significant_only_before_the_family_factor_is_rejected(run_axis):
-    """Coupling 3.6e-4 rad/s/°C: p 5.6e-4 over its own 6 options, × 4 time-domain candidates
+    """Coupling 3.6e-4 rad/s/°C: p < 1e-3 over its own 7 options, × 4 time-domain candidates
     tried in the round = 2.2e-3 ≥ α."""
     rec = _candidate(run_axis("temperature", 3.6e-4), "temperature")
     ev = rec.evidence
