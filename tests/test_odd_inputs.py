@@ -884,14 +884,14 @@ def test_a_curved_temperature_coupling(tmp_path: Path, capsys, curvature: float)
 
 
 @pytest.mark.parametrize("bad", ["nan", "inf", "every"])
-def test_temperature_messages_that_are_not_numbers_are_left_out(
+def test_temperature_messages_that_are_not_numbers_leave_it_unknown(
     tmp_path: Path, capsys, bad: str
 ) -> None:
-    """A driver publishing NaN (or inf) for a temperature it cannot read: those messages are
-    left out and the temperature interpolated between the others, with a warning; all of them
-    such, the temperature is not used. Before session 41 one infinite message stopped the
-    analysis ("internal error: LinAlgError: SVD did not converge" in the loop's regression)
-    and each NaN one spread over the frames around it."""
+    """A driver publishing NaN (or inf) for a temperature it cannot read: the temperature is
+    unknown (null) between those messages' neighbours, with a warning, and the loop reads the
+    rest; all of them such, the temperature is not used. Before session 41 one infinite
+    message stopped the analysis ("internal error: LinAlgError: SVD did not converge" in the
+    loop's regression), and NaN ones were not warned about."""
     n = 12_000
     stamps, gyro, accel = imu_stream(n)
     celsius = 25.0 + np.arange(n // 100) * 0.01  # 1 Hz
@@ -909,20 +909,24 @@ def test_temperature_messages_that_are_not_numbers_are_left_out(
         w.finish()
     rec = decode(path)
     said = [w for w in rec.warnings if "NaN or infinite" in w]
+    temp_c = rec.frames["temp_c"]
     if bad == "every":
         assert said == [
             "120 of the temperature topic's 120 message(s) are NaN or infinite: the temperature "
             "is not used"
         ]
-        assert rec.frames["temp_c"].null_count() == n or rec.frames["temp_c"].is_nan().all()
+        assert temp_c.null_count() == n
     else:
         assert said == [
             f"{len(dropped)} of the temperature topic's 120 message(s) are NaN or infinite: "
-            "left out, the temperature interpolated between the others"
+            "the temperature is unknown (null) between their neighbours"
         ]
-        good = np.setdiff1d(np.arange(n // 100), dropped)
-        want = np.interp(np.arange(n), good * 100, celsius[good])
-        np.testing.assert_allclose(rec.frames["temp_c"].to_numpy(), want, rtol=0, atol=1e-9)
+        unknown = np.zeros(n, bool)
+        for j in dropped:  # the frames after the message before and before the message after
+            unknown[(j - 1) * 100 + 1 : (j + 1) * 100] = True
+        assert temp_c.null_count() == unknown.sum()
+        want = np.interp(np.arange(n), np.arange(0, n, 100), celsius)
+        np.testing.assert_allclose(temp_c.to_numpy()[~unknown], want[~unknown], rtol=0, atol=1e-9)
     code, report, err = analyze(path, capsys, "--loop")
     assert code == 0, err
     assert said[0] in report["input"]["warnings"]

@@ -721,9 +721,10 @@ def _temperature_times(
     When none of its messages falls within the frames' span (stamped by another clock: the
     host's, the IMU by the sensor's), both are their log times (``log``, the IMU's, if kept),
     with a warning; None, with a warning, if that does not help either, or without messages.
-    Messages whose temperature is NaN or infinite (a driver's "not available") are left out,
-    with a warning (before session 41 an infinite one stopped the analysis with an internal
-    error in the loop's regression; NaN ones spread over the frames around them)."""
+    A message whose temperature is NaN or infinite (a driver's "not available") leaves it
+    unknown (NaN: null in the frame) between its neighbours, with a warning; all of them, the
+    temperature is not used.  Before session 41 an infinite one stopped the analysis with an
+    internal error in the loop's regression, and NaN ones were not warned about."""
     temp = temperature.concat()
     if base == "log_time_ns":
         at = temp["log_time_ns"]
@@ -731,21 +732,23 @@ def _temperature_times(
         at = _placed_after_resets(temp, temperature.steps, [])
     else:
         at = temp["stamp_ns"]
-    celsius, logged = temp["temp_c"], temp["log_time_ns"]
+    celsius = temp["temp_c"]
     finite = np.isfinite(celsius)
     if not finite.all():
         bad = len(celsius) - int(np.count_nonzero(finite))
         warnings.append(
             f"{bad} of the temperature topic's {len(celsius)} message(s) are NaN or infinite: "
-            + ("left out, the temperature interpolated between the others" if finite.any()
+            + ("the temperature is unknown (null) between their neighbours" if finite.any()
                else "the temperature is not used")
         )  # fmt: skip
-        at, celsius, logged = at[finite], celsius[finite], logged[finite]
+        if not finite.any():
+            return None
+        celsius = np.where(finite, celsius, np.nan)  # inf: unknown, as NaN
     if not len(at):
         return None
     if not _overlaps(at, x):
         clock = "log time" if base == "log_time_ns" else "header.stamp"
-        if log is None or base == "log_time_ns" or not _overlaps(logged, log):
+        if log is None or base == "log_time_ns" or not _overlaps(temp["log_time_ns"], log):
             warnings.append(
                 f"the temperature topic's {len(at)} message(s) are stamped outside the IMU's "
                 f"time span ({clock}: another clock?): the temperature is not used"
@@ -755,7 +758,7 @@ def _temperature_times(
             f"the temperature topic's {len(at)} message(s) are stamped outside the IMU's time "
             f"span ({clock}: another clock?): it is placed by the MCAP log time"
         )
-        x, at = log, logged
+        x, at = log, temp["log_time_ns"]
     return x, at, celsius
 
 

@@ -675,7 +675,7 @@ def coupling_candidate(
     filtered = read_noise_dominates(aux_d)
     level = moving_average(aux_d, LOWPASS_BLOCKS) if filtered else aux_d
     rate = np.gradient(level, dt)
-    lowpass_s = LOWPASS_BLOCKS * dt if filtered else 0.0
+    lowpass_s = round(LOWPASS_BLOCKS * dt, 9) if filtered else 0.0  # (s, to the ns)
     options = []
     for lag_s in LAGS_S:
         k = round(lag_s / dt)

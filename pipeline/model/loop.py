@@ -512,8 +512,9 @@ class _Axis:
         """Block factors of the decimated Allan change of a slow correction: those on either
         side of each τ ≥ block (:meth:`corrected_avar`)."""
         self.m_d_at = (np.searchsorted(self.m_d, m_lo), np.searchsorted(self.m_d, m_hi))
-        self.m_d_weight = np.where(
-            m_hi > m_lo, np.log(np.maximum(ratio, 1.0) / m_lo) / np.log(m_hi / m_lo), 0.0
+        span = np.log(m_hi / m_lo)  # 0 at the top factor, which has no upper neighbour
+        self.m_d_weight = np.divide(
+            np.log(ratio / m_lo), span, out=np.zeros_like(span), where=span > 0
         )
         """Weight of the upper factor of each τ (interpolation in log τ)."""
         self._spikes: effects.Candidate | None = None

@@ -647,19 +647,20 @@ def test_read_noise_dominates(channel: str, dominates: bool) -> None:
     assert effects.read_noise_dominates(x) is dominates
 
 
-@pytest.mark.parametrize(("quantised", "lowpass_s"), [(True, 15.5), (False, 0.0)])
+@pytest.mark.parametrize(("quantised", "lowpass_s"), [(True, 3.1), (False, 0.0)])
 def test_a_coupling_low_passes_only_a_channel_its_read_noise_dominates(
     quantised: bool, lowpass_s: float
 ) -> None:
-    """The coupling's level: the channel low-passed over 31 blocks (of 0.5 s: 15.5 s) where its
-    changes are read noise or quantisation, else its block means; the regressor the candidate
-    corrects with is that level (lag 0 here), scaled by the coefficient."""
+    """The coupling's level: the channel low-passed over 31 blocks (of 0.1 s: 3.1 s, to the ns:
+    not 3.1000000000000005) where its changes are read noise or quantisation, else its block
+    means; the regressor the candidate corrects with is that level (lag 0 here), scaled by the
+    coefficient."""
     rng = np.random.default_rng(5)
-    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 0.5)
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 0.1)
     walk = np.cumsum(rng.standard_normal(N_D))
     aux = np.round(walk / 4) * 4 if quantised else walk  # coarse LSBs: mostly equal blocks
     y = 0.5 * walk + rng.standard_normal(N_D)
-    cand = effects.coupling_candidate("temperature", y, aux, 0.5, "degC", whiten)
+    cand = effects.coupling_candidate("temperature", y, aux, 0.1, "degC", whiten)
     assert cand.params["lowpass_s"] == lowpass_s and cand.params["lag_s"] == 0.0
     level = effects.moving_average(aux, 31) if quantised else aux
     assert cand.regressors[:, 0] == pytest.approx(level, abs=1e-12)
