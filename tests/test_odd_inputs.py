@@ -840,6 +840,22 @@ def test_a_fast_temperature_is_corrected_unfiltered(tmp_path: Path, capsys) -> N
     assert all(not a["effects"] for axis, a in report["axes"].items() if axis != "gyro_x")
 
 
+def write_imu_and_temperature(
+    path: Path, imu: tuple[np.ndarray, ...], temp_ns: np.ndarray, celsius: np.ndarray
+) -> Path:
+    """``/imu/data`` (stamps ns, gyro, accel; logged at the stamps) and ``/imu/temperature``
+    (°C at ``temp_ns``), one chunk each."""
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        cid = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        temp_schema = w.register_schema("sensor_msgs/msg/Temperature", "ros2msg", b"")
+        temp = w.register_channel("/imu/temperature", "cdr", temp_schema)
+        w.write_chunk(cid, imu[0], imu_payloads(*imu))
+        w.write_chunk(temp, temp_ns, temperature_payloads(temp_ns, celsius))
+        w.finish()
+    return path
+
+
 @pytest.mark.parametrize("curvature", [0.0, 3e-5])
 def test_a_curved_temperature_coupling(tmp_path: Path, capsys, curvature: float) -> None:
     """gyro_x's bias 1e-4 (T − 25) + c₂ (T − 25)² rad/s while the lab cycles 25 ± 3 °C every
@@ -853,18 +869,10 @@ def test_a_curved_temperature_coupling(tmp_path: Path, capsys, curvature: float)
     stamps, gyro, accel = imu_stream(n, seed=3)
     celsius = 25 + 3 * np.sin(2 * np.pi * np.arange(n) / 100 / 1200 + 0.3)
     gyro[:, 0] += 1e-4 * (celsius - 25) + curvature * (celsius - 25) ** 2
-    path = tmp_path / "f.mcap"
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        temp_schema = w.register_schema("sensor_msgs/msg/Temperature", "ros2msg", b"")
-        temp = w.register_channel("/imu/temperature", "cdr", temp_schema)
-        w.write_chunk(imu, stamps, imu_payloads(stamps, gyro, accel))
-        each = slice(0, n, 100)
-        w.write_chunk(
-            temp, stamps[each], temperature_payloads(stamps[each], np.round(celsius[each], 2))
-        )
-        w.finish()
+    each = slice(0, n, 100)
+    path = write_imu_and_temperature(
+        tmp_path / "f.mcap", (stamps, gyro, accel), stamps[each], np.round(celsius[each], 2)
+    )
     code, report, err = analyze(path, capsys, "--loop")
     assert code == 0, err
     gyro_x = report["axes"]["gyro_x"]
@@ -898,15 +906,9 @@ def test_temperature_messages_that_are_not_numbers_leave_it_unknown(
     sent = celsius.copy()
     dropped = {"nan": [7, 8, 50], "inf": [30], "every": list(range(n // 100))}[bad]
     sent[dropped] = np.nan if bad != "inf" else np.inf
-    path = tmp_path / "f.mcap"
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        temp_schema = w.register_schema("sensor_msgs/msg/Temperature", "ros2msg", b"")
-        temp = w.register_channel("/imu/temperature", "cdr", temp_schema)
-        w.write_chunk(imu, stamps, imu_payloads(stamps, gyro, accel))
-        w.write_chunk(temp, stamps[::100], temperature_payloads(stamps[::100], sent))
-        w.finish()
+    path = write_imu_and_temperature(
+        tmp_path / "f.mcap", (stamps, gyro, accel), stamps[::100], sent
+    )
     rec = decode(path)
     said = [w for w in rec.warnings if "NaN or infinite" in w]
     temp_c = rec.frames["temp_c"]
