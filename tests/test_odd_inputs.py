@@ -917,8 +917,9 @@ def test_temperature_messages_that_are_not_numbers_leave_it_unknown(
             "120 of the temperature topic's 120 message(s) are NaN or infinite: the temperature "
             "is not used"
         ]
-        assert temp_c.null_count() == n
+        assert temp_c.null_count() == n and rec.temperature_topic is None  # (report.json: null)
     else:
+        assert rec.temperature_topic == "/imu/temperature"
         assert said == [
             f"{len(dropped)} of the temperature topic's 120 message(s) are NaN or infinite: "
             "the temperature is unknown (null) between their neighbours"

@@ -882,13 +882,15 @@ class ScannedRecording:
         cols = self.channel.concat(self._raw(columns, base))
         if base == "placed_stamp_ns":
             cols[base] = _placed_after_resets(cols, self.channel.steps, noted)
-        temp_c = None
+        temp_c, temperature_topic = None, self.temperature_topic
         if self.temperature is not None and base is not None:  # (warned with t_s, as the
             # spilled source's conditioning reads it without temp_c)
             reuse = warm and not timed and base not in columns  # (columns: not None untimed)
             x = cols.pop(base) if reuse else cols[base]
             log = cols.get("log_time_ns")
             times = _temperature_times(self.temperature, base, x, log, warnings)
+            if times is None:  # not used: report.json's temperature_topic is null
+                temperature_topic = None
             if warm and times is not None:
                 temp_c = _temperature(times, x.view(np.float64) if reuse else np.empty(n))
         t_s, time_source = None, ""
@@ -914,7 +916,7 @@ class ScannedRecording:
             device=self.device_meta,
             warnings=warnings,
             topics=self.topics,
-            temperature_topic=self.temperature_topic,
+            temperature_topic=temperature_topic,
             frame_ids=self.frame_ids,
         )
 

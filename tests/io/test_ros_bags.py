@@ -271,7 +271,9 @@ def test_a_temperature_stamped_by_another_clock_is_placed_by_the_log_time(
     if keep_one:
         assert rec.frames["temp_c"].null_count() == 300
         assert rec.warnings == [outside + "the temperature is not used"]
+        assert rec.temperature_topic is None  # not used: report.json's is null
     else:
+        assert rec.temperature_topic == "/imu/temp"
         expected = 25.0 + np.minimum(np.arange(300), 200)  # held after the last message
         np.testing.assert_allclose(rec.frames["temp_c"].to_numpy(), expected, rtol=0, atol=1e-9)
         assert rec.warnings == [outside + "it is placed by the MCAP log time"]
