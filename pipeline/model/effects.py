@@ -546,6 +546,7 @@ class Candidate:
             self.regressors = np.column_stack(list(regs.values()))
             self.names = tuple(regs)
             self.params = dict(fixed)
+            self.intervals = {}  # the option chosen before may have had other coefficients
             fit = fits[best]
         else:
             assert self.regressors is not None

@@ -669,6 +669,24 @@ def test_a_coupling_low_passes_only_a_channel_its_read_noise_dominates(
     assert cand.params["coefficient"] == pytest.approx(0.5, rel=0.1)
 
 
+def test_a_refit_that_chooses_another_option_keeps_only_its_intervals() -> None:
+    """Options {a} and {a, b}: fitted to a series that needs b, then refitted to one that
+    does not, the candidate's intervals are those of the option chosen last — before session
+    41 report.json's coupling could carry a `coefficient_rate` interval beside params that had
+    no rate (the interval of the option chosen under the first whitener)."""
+    rng = np.random.default_rng(9)
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 1.0)
+    a, b = np.cumsum(rng.standard_normal((2, N_D)), axis=1)
+    noise = rng.standard_normal(N_D)
+    cand = effects.Candidate(
+        "temperature", {}, {}, options=[({"a": a}, {}), ({"a": a, "b": b}, {})]
+    )
+    cand.refit(whiten, a + 0.5 * b + noise)
+    assert set(cand.params) == set(cand.intervals) == {"a", "b"}
+    cand.refit(whiten, a + noise)
+    assert set(cand.params) == {"a"} and set(cand.intervals) == {"a"}
+
+
 def test_a_coupling_leads_by_its_lag_in_seconds() -> None:
     """A channel leading the rate by 60 s on blocks of 0.5 s: the lag-60 option shifts it by
     120 blocks, and is the one chosen, with the coefficient."""
