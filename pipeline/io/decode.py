@@ -689,9 +689,9 @@ def _placed_after_resets(
             out[a:b] += offset - offsets[0]
         how = "the messages after each jump are placed by the MCAP log time"
     else:
-        steps = np.diff(out)
-        steps = steps[(steps > 0) & (steps <= CLOCK_RESET_NS)]
-        period = _median_ns(steps) if len(steps) else 0  # (none: a duplicate stamp, flagged)
+        forward = np.diff(out)
+        forward = forward[(forward > 0) & (forward <= CLOCK_RESET_NS)]
+        period = _median_ns(forward) if len(forward) else 0  # (none: a duplicate stamp, flagged)
         for a, b in runs[1:]:
             out[a:b] += out[a - 1] + 2 * period - out[a]
         how = (
