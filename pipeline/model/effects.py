@@ -45,6 +45,7 @@ Z95 = float(special.ndtri(0.975))  # scipy.stats.norm.ppf, without importing sci
 LAGS_S = (0.0, 60.0, 300.0)  # auxiliary channel leading the rate (s)
 PSD_MAX_SAMPLES = 1 << 24  # longest series of the periodogram line search (psd_line)
 LOWPASS_BLOCKS = 31  # moving average of ADIS TEMP/SUPPLY (coarsely quantised) in blocks
+MAX_STEP_REVERSALS = 1 / 3  # a staircase turning back less often passes through its levels
 N_WARMUP_TAU = 24  # warm-up time constants tried
 MAX_GLS_POINTS = 1024  # coarse blocks of the exact GLS
 
@@ -657,26 +658,15 @@ def coupling_candidate(
     (truth 0; 2 h at 100 Hz, ``tests/test_odd_inputs.py::test_a_curved_temperature_coupling``).
     Only at lag 0, the sensor's own temperature: the option costs every coupling's test a
     Bonferroni factor 7/6 (all lags: 9/6, which lost the weak coupling of
-    ``tests/model/test_loop_sim.py::test_temperature_coupling`` seed 17).  The level is the
-    channel's block means low-passed over :data:`LOWPASS_BLOCKS` blocks where their changes
-    are mostly read noise or quantisation (:func:`read_noise_dominates`: the ADIS TEMP and
-    SUPPLY words are coarsely quantised), else the block means themselves (param ``lowpass_s``: the
-    window, s; 0 unfiltered).  The choice reads the channel only, so it costs no test.  A
-    channel that moves within the window needs its own level: a temperature random-walking
-    0.2 °C/√s at 1 Hz drove a gyro's bias by 1e-3 rad/s/K (5 min at 100 Hz, blocks 0.58 s);
-    the low-passed level left its wander within the 18 s window in the corrected curve
-    (Allan error 0.16 → 2.93, refused: its drift was read as a rate random walk;
-    ``tests/test_odd_inputs.py::test_a_fast_temperature_is_corrected_unfiltered``).  Offering
-    both levels instead cost a weak coupling its significance (family p × 9/6: 7.9e-4 → 1.2e-3
-    under K's bound, ``tests/model/test_loop_sim.py::test_temperature_coupling`` seed 17).
-    Params ``reference_level`` (the curvature's centre) with ``coefficient_quadratic``.
+    ``tests/model/test_loop_sim.py::test_temperature_coupling`` seed 17).  The level is
+    :func:`coupling_level` (param ``lowpass_s``; ``evidence["level"]`` says which); it reads
+    the channel only, so it costs no test.  Params ``reference_level`` (the curvature's
+    centre) with ``coefficient_quadratic``.
     """
     if aux_d is None or np.ptp(aux_d) == 0:
         return None
-    filtered = read_noise_dominates(aux_d)
-    level = moving_average(aux_d, LOWPASS_BLOCKS) if filtered else aux_d
+    level, lowpass_s, level_note = coupling_level(aux_d, dt)
     rate = np.gradient(level, dt)
-    lowpass_s = round(LOWPASS_BLOCKS * dt, 9) if filtered else 0.0  # (s, to the ns)
     options = []
     for lag_s in LAGS_S:
         k = round(lag_s / dt)
@@ -691,6 +681,7 @@ def coupling_candidate(
     curved = {"coefficient": level, "coefficient_quadratic": (level - reference) ** 2}
     options.append((curved, {"lag_s": 0.0, "lowpass_s": lowpass_s, "reference_level": reference}))
     cand = _best_option(kind, y_d, whiten, options)
+    cand.evidence["level"] = level_note
     cand.evidence["unit"] = (
         f"rate per {unit} (coefficient_rate: per {unit}/s; coefficient_quadratic: per {unit}² "
         f"of the level's departure from reference_level, {unit})"
@@ -698,20 +689,81 @@ def coupling_candidate(
     return cand
 
 
+def coupling_level(x: np.ndarray, dt: float) -> tuple[np.ndarray, float, str]:
+    """The level a coupling regresses on, from a channel's block means ``x`` (blocks of ``dt``
+    s): (level, low-pass window s — 0 unfiltered —, what it is, for ``evidence["level"]``).
+
+    - A staircase passing through its levels (:func:`is_staircase`: it moves less than one LSB
+      a block; fewer than :data:`MAX_STEP_REVERSALS` of its steps turn back): interpolated
+      through its steps' midpoints (:func:`step_midpoints`), then low-passed over
+      :data:`LOWPASS_BLOCKS` blocks.  Its block means, raw or low-passed, leave a sawtooth as
+      slow as its steps in the correction, and under the baseline's whitener (which had soaked
+      the coupling into B) the steps outweigh the slow motion the rate follows: a bag's
+      temperature read in 0.25 °C steps at 1 Hz, a gyro's bias following a lab's 25 → 28 °C
+      with a 1 °C, 30 min cycle by 3e-4 rad/s/°C (2 h at 100 Hz), gave 4e-5 rad/s/°C and no
+      effect, B 4.3e-4 rad/s (truth 0)
+      (``tests/test_odd_inputs.py::test_a_temperature_read_in_steps_is_read_through_them``).
+    - A staircase that dithers (a quantised random wander: ~0.58 of its steps turn back) or
+      whose changes are mostly read noise (:func:`read_noise_dominates`): the moving average
+      over :data:`LOWPASS_BLOCKS` blocks (on the ADIS-like dithering temperature of
+      ``tests/model/test_loop.py``, 4e-4 rad/s/°C, the step midpoints found 12 of 30 seeds,
+      the moving average 14).
+    - Else the block means themselves: a channel that moves within the window needs its own
+      level (a temperature random-walking 0.2 °C/√s at 1 Hz, a gyro's bias following it by
+      1e-3 rad/s/K: the low-passed level left its wander within the 18 s window in the
+      corrected curve, Allan error 0.16 → 2.93, refused;
+      ``tests/test_odd_inputs.py::test_a_fast_temperature_is_corrected_unfiltered``).
+    """
+    lowpass_s = round(LOWPASS_BLOCKS * dt, 9)  # (s, to the ns)
+    staircase = is_staircase(x)
+    if staircase and step_reversals(x) < MAX_STEP_REVERSALS:
+        level = moving_average(step_midpoints(x), LOWPASS_BLOCKS)
+        return level, lowpass_s, "step midpoints, moving average (the channel passes through steps)"
+    if staircase or read_noise_dominates(x):
+        return moving_average(x, LOWPASS_BLOCKS), lowpass_s, "moving average"
+    return x, 0.0, "block means"
+
+
+def is_staircase(x: np.ndarray) -> bool:
+    """Whether at least half of a channel's block-to-block differences are 0 (``x``: its block
+    means): it moves less than one LSB a block and reads as a staircase."""
+    d = np.diff(x)
+    return bool(d.size >= 2 and np.mean(d == 0) >= 0.5)
+
+
+def step_reversals(x: np.ndarray) -> float:
+    """The share of a channel's steps (its nonzero block-to-block changes) that turn back
+    from the step before (0 with fewer than two steps).  A channel passing smoothly through its
+    quantisation levels turns back only where it turns (a lab's 1 °C, 30 min cycle read in
+    0.1–0.5 °C steps: 0.05–0.28); a quantised random wander dithers about each level (0.58)."""
+    d = np.sign(np.diff(x))
+    d = d[d != 0]
+    return float(np.mean(d[1:] != d[:-1])) if d.size >= 2 else 0.0
+
+
+def step_midpoints(x: np.ndarray) -> np.ndarray:
+    """A staircase's level: linear through the midpoints of its successive steps (and the
+    first and last blocks' values at the ends).  A quantised channel that steps from k to
+    k + 1 LSB crossed k + ½ there; between two crossings it moved from one to the other.  Where it
+    dithers about a crossing, every step's midpoint is that crossing; where it turns back
+    between two crossings of the same level, the turn is lost (up to ½ LSB)."""
+    j = np.flatnonzero(np.diff(x))
+    if j.size == 0:
+        return x.astype(float)
+    at = np.concatenate(([0.0], j + 0.5, [len(x) - 1.0]))
+    value = np.concatenate(([x[0]], (x[j] + x[j + 1]) / 2, [x[-1]]))
+    return np.interp(np.arange(len(x), dtype=float), at, value)
+
+
 def read_noise_dominates(x: np.ndarray) -> bool:
     """Whether a channel's block-to-block changes (``x``: its block means) are mostly read
-    noise or quantisation rather than its motion — then a coupling low-passes it.
+    noise rather than its motion — then a coupling low-passes it (:func:`coupling_level`).
 
-    Read noise: −2 ρ₁ of the successive differences is at least ½ (white noise w adds 2σ_w²
-    to their variance and −σ_w² to their lag-1 covariance: ρ₁ = −½; a random walk's
-    differences are uncorrelated, a smooth signal's positively correlated).  Quantisation:
-    at least half the differences are 0 — a channel that moves less than one LSB a block
-    reads as a staircase, whose error is a sawtooth as slow as its steps (the simulator's
-    lab warming 2.5 °C in 30 min through 0.136 °C LSBs: steps every ~100 s; its block means
-    as the level cost a weak coupling its significance, family p under K's bound 7.9e-4 →
-    3.8e-3, ``tests/model/test_loop_sim.py::test_temperature_coupling`` seed 17)."""
+    −2 ρ₁ of the successive differences is at least ½ (white noise w adds 2σ_w² to their
+    variance and −σ_w² to their lag-1 covariance: ρ₁ = −½; a random walk's differences are
+    uncorrelated, a smooth signal's positively correlated)."""
     d = np.diff(x)
-    if d.size < 2 or np.mean(d == 0) >= 0.5:
+    if d.size < 2:
         return True
     d = d - d.mean()
     var = float(d @ d)

@@ -617,24 +617,12 @@ def test_options_searched_are_counted_in_the_evidence():
         assert 0 < cand.evidence["p_value_bonferroni"] == cand.p_value <= 1
 
 
-@pytest.mark.parametrize(
-    ("channel", "dominates"),
-    [
-        ("white", True),  # read noise alone: ρ₁ of the differences −½
-        ("walk_plus_half_noise", True),  # a walk whose read noise is 1.2× its step: share 0.74
-        ("walk_plus_little_noise", False),  # the same walk with 0.5× its step: share 0.33
-        ("walk", False),
-        ("staircase", True),  # a slow warming through 0.136 °C LSBs: 90 % of blocks equal
-        ("interpolated_walk", False),  # 1 Hz values linearly interpolated, 0.25 s blocks
-        ("ramp", True),  # equal differences: nothing to tell, low-passing costs nothing
-        ("half_still", True),  # moves every other pair of blocks: half its differences 0
-    ],
-)
-def test_read_noise_dominates(channel: str, dominates: bool) -> None:
+def _channel(name: str) -> np.ndarray:
+    """A channel's block means, by name (4000 blocks)."""
     rng = np.random.default_rng(4)
     n = 4000
     walk = np.cumsum(rng.standard_normal(n))
-    x = {
+    return {
         "white": rng.standard_normal(n),
         "walk_plus_half_noise": walk + 1.2 * rng.standard_normal(n),
         "walk_plus_little_noise": walk + 0.5 * rng.standard_normal(n),
@@ -643,17 +631,101 @@ def test_read_noise_dominates(channel: str, dominates: bool) -> None:
         "interpolated_walk": np.interp(np.arange(n) / 4, np.arange(n // 4 + 1), walk[: n // 4 + 1]),
         "ramp": np.arange(n) * 0.01,
         "half_still": np.cumsum(np.tile([0.0, 1.0, 1.0, 0.0], n // 4 + 1)[: n + 1]),  # ρ₁ ~0
+        "nearly_half_still": np.cumsum(np.tile([0.0, 1.0, 1.0, 1.0, 0.0], n // 5 + 1)[: n + 1]),
+        "dithering": np.round(walk / 4) * 4,  # coarse LSBs: 0.76 of its steps turn back
+        "cycle": np.round(np.sin(np.arange(n) * 2 * np.pi / 1000) / 0.5) * 0.5,
+    }[name]
+
+
+@pytest.mark.parametrize(
+    ("channel", "dominates"),
+    [
+        ("white", True),  # read noise alone: ρ₁ of the differences −½
+        ("walk_plus_half_noise", True),  # a walk whose read noise is 1.2× its step: share 0.74
+        ("walk_plus_little_noise", False),  # the same walk with 0.5× its step: share 0.33
+        ("walk", False),
+        ("interpolated_walk", False),  # 1 Hz values linearly interpolated, 0.25 s blocks
+        ("ramp", True),  # equal differences: nothing to tell, low-passing costs nothing
+    ],
+)
+def test_read_noise_dominates(channel: str, dominates: bool) -> None:
+    assert effects.read_noise_dominates(_channel(channel)) is dominates
+    assert not effects.is_staircase(_channel(channel))
+
+
+@pytest.mark.parametrize(
+    ("channel", "staircase"),
+    [
+        ("staircase", True),  # a slow warming through 0.136 °C LSBs: 90 % of blocks equal
+        ("half_still", True),  # moves every other pair of blocks: half its differences 0
+        ("nearly_half_still", False),  # 2 of 5 differences 0
+        ("walk", False),
+    ],
+)
+def test_a_staircase_is_a_channel_whose_blocks_are_mostly_equal(
+    channel: str, staircase: bool
+) -> None:
+    assert effects.is_staircase(_channel(channel)) is staircase
+
+
+def test_a_staircase_is_read_through_its_steps_midpoints() -> None:
+    """Steps from 0 to 1 after block 3 and from 1 to 3 after block 7: the level runs from the
+    first block's 0 to ½ at 3.5 (the first step's midpoint), on to 2 at 7.5 (the second's) and
+    to the last block's 3 at 9; a channel that never steps is itself."""
+    x = np.array([0, 0, 0, 0, 1, 1, 1, 1, 3, 3.0])
+    level = effects.step_midpoints(x)
+    expected = [0, 1 / 7, 2 / 7, 3 / 7, 0.5 + 1.5 / 8, 0.5 + 1.5 * 3 / 8, 0.5 + 1.5 * 5 / 8,
+                0.5 + 1.5 * 7 / 8, 2 + 1 / 3, 3.0]  # fmt: skip
+    assert level == pytest.approx(expected, abs=1e-12)
+    assert effects.step_midpoints(np.full(5, 2.0)) == pytest.approx(np.full(5, 2.0))
+
+
+@pytest.mark.parametrize(
+    ("channel", "reversals"),
+    [("staircase", 0.0), ("cycle", 8 / 31), ("dithering", 0.752), ("half_still", 0.0)],
+)
+def test_a_staircases_steps_that_turn_back(channel: str, reversals: float) -> None:
+    """The share of steps opposite to the step before: none on a ramp, 8 of 31 on four
+    cycles of ±1 read in 0.5 steps (32 steps, one turning back at each crest and trough), ~¾
+    on a walk read in steps of 4 of its own."""
+    assert effects.step_reversals(_channel(channel)) == pytest.approx(reversals, abs=1e-3)
+    assert effects.step_reversals(np.array([0.0, 0.0, 1.0, 1.0])) == 0.0  # one step: none
+
+
+@pytest.mark.parametrize(
+    ("channel", "lowpass_s", "note"),
+    [
+        ("staircase", 3.1, "step midpoints, moving average (the channel passes through steps)"),
+        ("dithering", 3.1, "moving average"),
+        ("white", 3.1, "moving average"),
+        ("walk", 0.0, "block means"),
+    ],
+)
+def test_a_couplings_level_is_chosen_by_the_channel(
+    channel: str, lowpass_s: float, note: str
+) -> None:
+    """On blocks of 0.1 s: a staircase passing through its levels read through its steps'
+    midpoints and low-passed over 31 blocks (3.1 s, to the ns: not 3.1000000000000005), one
+    that dithers or a channel of read noise low-passed, one that moves taken as it is."""
+    x = _channel(channel)
+    level, window, what = effects.coupling_level(x, 0.1)
+    assert (window, what) == (lowpass_s, note)
+    expected = {
+        "staircase": effects.moving_average(effects.step_midpoints(x), 31),
+        "dithering": effects.moving_average(x, 31),
+        "white": effects.moving_average(x, 31),
+        "walk": x,
     }[channel]
-    assert effects.read_noise_dominates(x) is dominates
+    assert level == pytest.approx(expected, abs=1e-12)
 
 
 @pytest.mark.parametrize(("quantised", "lowpass_s"), [(True, 3.1), (False, 0.0)])
 def test_a_coupling_low_passes_only_a_channel_its_read_noise_dominates(
     quantised: bool, lowpass_s: float
 ) -> None:
-    """The coupling's level: the channel low-passed over 31 blocks (of 0.1 s: 3.1 s, to the ns:
-    not 3.1000000000000005) where its changes are read noise or quantisation, else its block
-    means; the regressor the candidate corrects with is that level (lag 0 here), scaled by the
+    """The coupling's level (:func:`effects.coupling_level`): a walk read in coarse steps
+    (it dithers) low-passed over 31 blocks (of 0.1 s: 3.1 s), else its block means; the
+    regressor the candidate corrects with is that level (lag 0 here), scaled by the
     coefficient."""
     rng = np.random.default_rng(5)
     whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 0.1)
