@@ -891,34 +891,35 @@ def test_a_curved_temperature_coupling(tmp_path: Path, capsys, curvature: float)
     assert all(not a["effects"] for axis, a in report["axes"].items() if axis != "gyro_x")
 
 
-def test_a_temperature_read_in_steps_is_read_through_them(tmp_path: Path, capsys) -> None:
-    """A bag's temperature in 0.25 °C steps at 1 Hz while the lab warms 25 → 26.5 °C with a
-    1 °C, 30 min cycle, gyro_x's bias following it by 3e-4 rad/s/°C (1 h at 100 Hz): the
-    coupling is found, its interval holding the truth, regressed on the steps' midpoints
-    low-passed (a staircase passing through its levels: 4 of its 34 steps turn back), and B stays
-    unresolved (the truth is white noise alone).  Before session 42 no effect was found and
-    the cycle was read as B = 4.3e-4 rad/s: under the baseline's whitener (B had soaked up the
-    coupling) the steps outweighed the slow motion; now the level is read through the steps
-    and the coupling also starts from least squares under the white noise alone, the likelier
-    model (time-domain deviance) kept."""
+@pytest.mark.parametrize(("resolution", "width"), [(0.25, 0.07), (1.0, 0.75)])
+def test_a_temperature_read_in_steps_is_read_through_them(
+    tmp_path: Path, capsys, resolution: float, width: float
+) -> None:
+    """A bag's temperature in 0.25 (or 1) °C steps at 1 Hz while the lab warms 25 → 26.5 °C
+    with a 1 °C, 30 min cycle, gyro_x's bias following it by 3e-4 rad/s/°C (1 h at 100 Hz):
+    the coupling is found, regressed on a spline through the steps' midpoints (a staircase
+    passing through its levels), its interval holding the truth (6 % wide; 1 °C steps: 69 %),
+    and B stays unresolved (the truth is white noise alone).  Before session 42 no effect was
+    found and the cycle was read as a bias instability B of 4.3e-4 rad/s: the steps
+    or the low-passed steps were the level, and under the baseline's whitener (B had soaked up
+    the coupling) the steps outweighed the slow motion the bias follows."""
     n = 360_000
     stamps, gyro, accel = imu_stream(n, seed=4)
     t = np.arange(n) / 100
     celsius = 25 + 1.5 * t / 3600 + np.sin(2 * np.pi * t / 1800)
     gyro[:, 0] += 3e-4 * (celsius - 25)
     each = slice(0, n, 100)
-    path = write_imu_and_temperature(
-        tmp_path / "f.mcap", (stamps, gyro, accel), stamps[each], np.round(celsius[each] * 4) / 4
-    )
+    read = np.round(celsius[each] / resolution) * resolution
+    path = write_imu_and_temperature(tmp_path / "f.mcap", (stamps, gyro, accel), stamps[each], read)
     code, report, err = analyze(path, capsys, "--loop")
     assert code == 0, err
     gyro_x = report["axes"]["gyro_x"]
     (effect,) = gyro_x["effects"]
     assert effect["kind"] == "temperature" and effect["params"]["lag_s"] == 0.0
     assert set(effect["params"]) == {"lag_s", "lowpass_s", "coefficient"}
-    assert effect["evidence"]["level"].startswith("step midpoints")
+    assert effect["evidence"]["level"].startswith("a spline through its steps' midpoints")
     lo, hi = effect["intervals"]["coefficient"]
-    assert lo < 3e-4 < hi and hi - lo < 0.1 * 3e-4
+    assert lo < 3e-4 < hi and hi - lo < width * 3e-4
     assert gyro_x["ieee952"]["bias_instability"]["value"] is None
     assert all(not a["effects"] for axis, a in report["axes"].items() if axis != "gyro_x")
 

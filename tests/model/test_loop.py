@@ -105,3 +105,25 @@ def test_an_effects_interval_counts_the_correlated_tau_points(base, monkeypatch)
     assert (hi - lo) / (hi_i - lo_i) == pytest.approx(1.431, abs=0.01)
     assert (final.hi - final.lo) / (final_i.hi - final_i.lo) == pytest.approx(1.430, abs=0.01)
     assert lo < 3e-3 < hi and final.lo < 3e-3 < final.hi
+
+
+def test_a_coupling_read_in_whole_degrees_starts_again_from_least_squares():
+    """3e-4 rad/s/°C of a lab's 25 → 28 °C with a 1 °C, 30 min cycle, the temperature read in
+    whole degrees (2 h at 10 Hz, white noise alone: 1e-4 rad/s/√Hz).  The baseline read the
+    cycle as a bias instability B = 4.0e-4 rad/s; under its whitener the coupling's first start
+    was refused (before session 42 no effect, B kept).  The second start — least squares under
+    the white noise, refined — is the likelier model and is found: the coefficient within
+    13 % (the whole-degree steps bias it), B falls eightfold."""
+    rng = np.random.default_rng(1)
+    n = 72_000
+    t = np.arange(n) * TAU0
+    celsius = 25 + 3 * t / t[-1] + np.sin(2 * np.pi * t / 1800)
+    y = 3.16e-4 * rng.standard_normal(n) + 3e-4 * (celsius - 25)
+    curve = allan_curves(y, TAU0)[0]
+    signals = AxisSignals("gyro_x", "gyro", y, TAU0, aux_block_means(np.round(celsius), TAU0), None)
+    res = close_loop(signals, curve)
+    assert [e.kind for e in res.accepted] == ["temperature"]
+    assert res.accepted[0].params["coefficient"] == pytest.approx(3e-4, rel=0.15)
+    b_before = res.terms_before.bias_instability.value
+    assert b_before == pytest.approx(4.0e-4, rel=0.05)
+    assert res.terms_after.bias_instability.value < b_before / 7
