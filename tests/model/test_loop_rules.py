@@ -634,6 +634,7 @@ def _channel(name: str) -> np.ndarray:
         "nearly_half_still": np.cumsum(np.tile([0.0, 1.0, 1.0, 1.0, 0.0], n // 5 + 1)[: n + 1]),
         "dithering": np.round(walk / 4) * 4,  # coarse LSBs: 0.76 of its steps turn back
         "cycle": np.round(np.sin(np.arange(n) * 2 * np.pi / 1000) / 0.5) * 0.5,
+        "one_turn_in_three": np.repeat([0.0, 1.0, 2.0, 1.0, 0.0], n // 5),  # up, up, down, down
     }[name]
 
 
@@ -666,6 +667,8 @@ def test_a_staircase_is_a_channel_whose_blocks_are_mostly_equal(
     channel: str, staircase: bool
 ) -> None:
     assert effects.is_staircase(_channel(channel)) is staircase
+    assert effects.is_staircase(np.array([0.0, 0.0, 1.0]))  # two differences, one of them 0
+    assert not effects.is_staircase(np.array([0.0, 0.0]))  # one difference: nothing to tell
 
 
 def test_a_staircase_is_read_through_its_steps_midpoints() -> None:
@@ -710,6 +713,7 @@ def test_a_staircases_steps_that_turn_back(channel: str, reversals: float) -> No
     [
         ("staircase", 0.0, "a spline through its steps' midpoints (it reads in steps)"),
         ("dithering", 3.1, "moving average"),
+        ("one_turn_in_three", 3.1, "moving average"),  # a third of its steps turn back
         ("white", 3.1, "moving average"),
         ("walk", 0.0, "block means"),
     ],
@@ -726,6 +730,7 @@ def test_a_couplings_level_is_chosen_by_the_channel(
     expected = {
         "staircase": effects.step_midpoints(x),
         "dithering": effects.moving_average(x, 31),
+        "one_turn_in_three": effects.moving_average(x, 31),
         "white": effects.moving_average(x, 31),
         "walk": x,
     }[channel]
