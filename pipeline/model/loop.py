@@ -1354,14 +1354,20 @@ def _time_trial(
         assert robust is not None
         cand.evidence["p_value_family_k_bound"] = min(1.0, robust.p_value * n_tests)
         cand.evidence["intervals_fitted_psd"] = dict(cand.intervals)
-        cand.intervals |= {
-            k: [min(lo, cand.intervals[k][0]), max(hi, cand.intervals[k][1])]
-            for k, (lo, hi) in robust.intervals.items()
-            if k in cand.intervals
-        }
+        cand.intervals = _hull(cand.intervals, robust.intervals)
     return Trial(
         cand.kind, cand, _p_margin(cand.p_value), flags_ok, new_state, lambda: hold, change
     )
+
+
+def _hull(intervals: dict, others: dict) -> dict:
+    """``intervals`` (name → [lo, hi]), each widened to cover ``others``' interval of the same
+    name: a coupling tested under K's bound reports both GLS's intervals at once (K's bound's
+    alone, centred on its own estimate, could leave out the reported one)."""
+    return {
+        k: [min(lo, others[k][0]), max(hi, others[k][1])] if k in others else [lo, hi]
+        for k, (lo, hi) in intervals.items()
+    }
 
 
 def _refined(

@@ -38,7 +38,7 @@ import numpy as np
 import pytest
 from scipy import optimize, special, stats
 
-from imupipe.model import effects, ieee952
+from imupipe.model import effects, ieee952, loop
 from imupipe.model.loop import (
     AVAR_ONLY,
     AcceptedEffect,
@@ -982,3 +982,15 @@ def test_candidates_not_significant_on_a_clean_axis_are_rejected_with_family_p(r
         assert rec.reason.startswith(f"p {ev['p_value_family']:.3g} >= 0.001")
     # a p-value times the options searched is capped at 1 (the step: ~3000 change points)
     assert _candidate(res, "bias_step").evidence["p_value_bonferroni"] == 1.0
+
+
+def test_a_couplings_interval_under_k_bound_covers_both_estimates() -> None:
+    """The reported interval spans the fitted PSD's and K's bound's (session 42: K's bound's
+    alone, [3.00, 3.14]e-4, left out the reported 2.97e-4); a name only one has keeps its own."""
+    fitted = {"coefficient": [2.90, 3.04], "coefficient_rate": [0.0, 1.0]}
+    k_bound = {"coefficient": [3.00, 3.14], "lag_s": [0.0, 60.0]}
+    assert loop._hull(fitted, k_bound) == {
+        "coefficient": [2.90, 3.14],
+        "coefficient_rate": [0.0, 1.0],
+    }
+    assert loop._hull(k_bound, fitted) == {"coefficient": [2.90, 3.14], "lag_s": [0.0, 60.0]}
