@@ -409,8 +409,10 @@ def _loop_details(result: AnalysisResult) -> list[str]:
             continue
         md += [f"### {axis.name}", ""]
         for effect in jsonable(axis.loop.accepted):
+            level = (effect.get("evidence") or {}).get("level")  # a coupling's regressor
             md.append(
-                f"- accepted **{_kind_text(effect)}** ({_params(effect)}): error "
+                f"- accepted **{_kind_text(effect)}** ({_params(effect)}"
+                f"{'' if level is None else f'; level: {level}'}): error "
                 f"{_fmt(effect.get('error_before'))} → {_fmt(effect.get('error_after'))}"
             )
         for cand in jsonable(axis.loop.rejected):

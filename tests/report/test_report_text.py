@@ -80,7 +80,7 @@ def _loop(terms_after: ieee952.NoiseTerms) -> LoopResult:
         kind="temperature",
         params={"coefficient": 1.23456e-4, "lag_s": 12},
         intervals={"coefficient": [1.11111e-4, 1.33333e-4]},
-        evidence={},
+        evidence={"level": "moving average"},
         error_before=4.23456,
         error_after=1.034567,
     )
@@ -238,7 +238,7 @@ def test_loop_before_after_rounded_in_order(md: str) -> None:
     assert sum(ln.startswith("| gyro_") for ln in md.split("## Closed loop")[1].splitlines()) == 0
     assert (
         "- accepted **temperature** (coefficient = 0.0001235 [0.0001111, 0.0001333], "
-        "lag_s = 12): error 4.235 → 1.035"
+        "lag_s = 12; level: moving average): error 4.235 → 1.035"
     ) in md
     assert "- rejected candidate sinusoid: ΔBIC 2.1 < 10" in md
     # the per-term table: before (N × 1.5) then after, in the paper's unit
