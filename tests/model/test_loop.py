@@ -124,6 +124,9 @@ def test_a_coupling_read_in_whole_degrees_starts_again_from_least_squares():
     res = close_loop(signals, curve)
     assert [e.kind for e in res.accepted] == ["temperature"]
     assert res.accepted[0].params["coefficient"] == pytest.approx(3e-4, rel=0.15)
+    evidence = res.accepted[0].evidence
+    assert evidence["start"] == "least squares under the white noise"
+    assert evidence["start_deviances"][1] < evidence["start_deviances"][0]
     b_before = res.terms_before.bias_instability.value
     assert b_before == pytest.approx(4.0e-4, rel=0.05)
     assert res.terms_after.bias_instability.value < b_before / 7
