@@ -1407,21 +1407,20 @@ def _coupling_restart(
     the two, the one whose corrected model has the smaller time-domain deviance
     (:attr:`TimeFit.deviance`, −2 ln L of the series under the refitted model: a joint fit of
     noise and coupling) is the candidate (evidence ``start``, ``start_deviances``).  Its test
-    is unchanged (the refined GLS p-value,
-    the hold-out, the flags, and K's bound where the Allan view does not support it).  Where
-    both starts find a coupling read in coarse steps, the second's model is often the likelier
-    and its interval narrower: 0.5 °C steps (2 h at 10 Hz, 4 seeds) held the truth on 1 of 4
-    (the first start's, widened under K's bound: 4 of 4) — the steps bias the estimate by
-    2–3 % and the interval counts the noise, not the level's error.  Gating the second start
-    on the first's significance lost the 1 °C steps it is for (the first start is significant
-    under the fitted PSD there, and refused under K's bound).
+    is unchanged (the refined GLS p-value, the hold-out, the flags, and K's bound where the
+    Allan view does not support it).  Where both starts find a coupling read in coarse steps,
+    the second's model is often the likelier and its interval narrower: 0.5 °C steps (2 h at
+    10 Hz, 4 seeds) held the truth on 1 of 4 (the first start's, widened under K's bound: 4 of
+    4) — the steps bias the estimate by 2–3 % and the interval counts the noise, not the
+    level's error.  Gating the second start on the first's significance lost the 1 °C steps it
+    is for (the first start is significant under the fitted PSD there, and refused under K's
+    bound).
     ``first``: (candidate, whitener, state, model) of the first start, refined."""
-    cand = first[0]
     psd = noise_psd(fit, state.effect_parameters)
     white = replace(psd, flicker=0.0, rrw=0.0, gauss_markov=(), lines=())
     if white.silent:
         return first
-    alt = _coupling(ax, state, cand.kind, ax.whitener(white))
+    alt = _coupling(ax, state, first[0].kind, ax.whitener(white))
     assert alt is not None
     new_state = _corrected_state(ax, state, alt)
     fit_new = new_state.fit(ax)
