@@ -753,7 +753,11 @@ def step_midpoints(x: np.ndarray) -> np.ndarray:
     level (a crest) went beyond it, which straight lines hold flat: a lab's 1 °C, 30 min cycle
     on a 3 °C warming (1 s blocks), read in 0.1 / 0.25 / 0.5 / 1 °C steps, level rms error
     0.0008 / 0.0007 / 0.023 / 0.16 °C (straight lines 0.028 / 0.026 / 0.19 / 0.42; the steps
-    themselves 0.029 / 0.075 / 0.14 / 0.29)."""
+    themselves 0.029 / 0.075 / 0.14 / 0.29).  Held within half a (median) step of the
+    readings, where a quantised channel must be: between irregular steps the spline rang to
+    2.3 °C off the independent generator's temperature read in 0.25 °C steps; held, it is
+    within 0.25 °C (rms 0.093, the steps themselves 0.069 — Akima's local interpolant 0.039,
+    but it flattens a 1 °C cycle's crests read in 1 °C steps: 0.40)."""
     d = np.sign(np.diff(x))
     j = np.flatnonzero(d)
     if j.size == 0:
@@ -763,7 +767,9 @@ def step_midpoints(x: np.ndarray) -> np.ndarray:
     last = j[np.concatenate((new_run[1:], [True]))]
     at = np.concatenate(([0.0], (first + last) / 2 + 0.5, [len(x) - 1.0]))
     value = np.concatenate(([x[0]], (x[first] + x[last + 1]) / 2, [x[-1]]))
-    return interpolate.CubicSpline(at, value, bc_type="natural")(np.arange(len(x), dtype=float))
+    level = interpolate.CubicSpline(at, value, bc_type="natural")(np.arange(len(x), dtype=float))
+    half_step = np.median(np.abs(x[last + 1] - x[first])) / 2
+    return np.clip(level, x - half_step, x + half_step)
 
 
 def read_noise_dominates(x: np.ndarray) -> bool:
