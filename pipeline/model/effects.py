@@ -34,7 +34,7 @@ import numba
 import numpy as np
 import scipy.fft
 from numba.extending import get_cython_function_address
-from scipy import interpolate, linalg, special
+from scipy import interpolate, linalg, optimize, special
 
 from imupipe.jit import cores_here, kernel_input, on_parts, part_bounds, parts, spread
 from imupipe.stats import robust
@@ -42,7 +42,11 @@ from imupipe.stats.allan import NO_CORRECTION, SparseCorrection
 from imupipe.vocab import CHI2_95
 
 Z95 = float(special.ndtri(0.975))  # scipy.stats.norm.ppf, without importing scipy.stats
-LAGS_S = (0.0, 60.0, 300.0)  # auxiliary channel leading the rate (s)
+LAGS_S = tuple(30.0 * 10.0 ** (k / 2) for k in range(6))  # thermal lags tested, 30 s … 2.6 h
+LAG_STEPS_PER_DECADE = 12  # the lag's estimate: profiled on this grid, then refined
+MAX_EXPONENT = 500.0  # :func:`first_order_lag`'s spans: e^500 ≈ 1e217, below float64's 1.8e308
+PROFILE_POINTS = 9  # lags across the lag's interval that profile the coefficient's
+MIN_LAG_S = 10.0  # the profile's shortest lag (s): shorter is the rate column's (a lag ≈ −c_r/c)
 PSD_MAX_SAMPLES = 1 << 24  # longest series of the periodogram line search (psd_line)
 LOWPASS_BLOCKS = 31  # moving average of ADIS TEMP/SUPPLY (coarsely quantised) in blocks
 MAX_STEP_REVERSALS = 1 / 3  # a staircase turning back less often passes through its levels
@@ -462,6 +466,7 @@ class SpectralFit:
     cov: np.ndarray
     chi2: float
     dispersion: float  # residual variance of the whitened series (≈ 1 when the PSD fits)
+    rss: float  # its residual sum of squares (options with as many columns: profile deviance)
 
     def interval(self, j: int) -> list[float]:
         """95 % interval of coefficient ``j``."""
@@ -498,7 +503,7 @@ def spectral_fit(
     e = yw - x @ beta
     s2 = float(e @ e) / max(len(yw) - len(beta), 1)
     b, c = beta[:k], s2 * xtx_inv[:k, :k]
-    return SpectralFit(b, c, float(b @ np.linalg.pinv(c) @ b), s2)
+    return SpectralFit(b, c, float(b @ np.linalg.pinv(c) @ b), s2, float(e @ e))
 
 
 @dataclass
@@ -524,6 +529,7 @@ class Candidate:
     p_value: float = 1.0
     options: list[tuple[dict[str, np.ndarray], dict[str, float]]] = field(default_factory=list)
     drift_nuisance: bool = True  # a linear rate ramp is a nuisance (False: it is the effect)
+    lagged: LaggedLevel | None = None  # options with ``lag_s`` > 0: the lag estimated after
 
     def _drift(self, whiten: Whitener) -> np.ndarray:
         """The nuisance columns of the GLS: the whitened ramp, or none (m, 0)."""
@@ -537,6 +543,7 @@ class Candidate:
         over the options (see :func:`_profile_interval`), not conditional on the best one.
         """
         yw = whiten(y_d)
+        profiled: dict[str, list[float]] = {}
         if self.options:
             fits = [
                 spectral_fit(yw, whiten(np.column_stack(list(regs.values()))), self._drift(whiten))
@@ -544,25 +551,30 @@ class Candidate:
             ]
             best = int(np.argmin([f.log_p_value() for f in fits]))
             regs, fixed = self.options[best]
+            fit = tested = fits[best]
+            self.intervals = {}  # the option chosen before may have had other coefficients
+            if self.lagged is not None and fixed.get("lag_s", 0.0) > 0:
+                regs, fixed, fit, profiled = self.lagged.estimate(
+                    whiten, yw, self._drift(whiten), fixed, fits[0]
+                )
             self.regressors = np.column_stack(list(regs.values()))
             self.names = tuple(regs)
             self.params = dict(fixed)
-            self.intervals = {}  # the option chosen before may have had other coefficients
-            fit = fits[best]
         else:
             assert self.regressors is not None
-            fit = spectral_fit(yw, whiten(self.regressors), self._drift(whiten))
+            fit = tested = spectral_fit(yw, whiten(self.regressors), self._drift(whiten))
         for j, name in enumerate(self.names):
             self.params[name] = float(fit.beta[j])
             self.intervals[name] = fit.interval(j)
+        self.intervals |= profiled
         if self.options and all(len(regs) == 1 for regs, _ in self.options):
             self.intervals |= _profile_interval(fits, [fixed for _, fixed in self.options])
             self.intervals[self.names[0]] = self.intervals.pop("_coefficient")
         g = self.regressors @ fit.beta
         self.correction = g - g.mean()
-        self.p_value = min(1.0, self.n_options * fit.p_value())
+        self.p_value = min(1.0, self.n_options * tested.p_value())
         self.evidence |= {
-            "wald_chi2": fit.chi2,
+            "wald_chi2": tested.chi2,
             "p_value_bonferroni": self.p_value,
             "n_options": self.n_options,
             "whitened_dispersion": fit.dispersion,
@@ -598,9 +610,10 @@ def _best_option(
     y_d: np.ndarray,
     whiten: Whitener,
     options: list[tuple[dict[str, np.ndarray], dict[str, float]]],
+    lagged: LaggedLevel | None = None,
 ) -> Candidate:
     """The option (regressors, fixed params) with the smallest p-value, Bonferroni × len."""
-    cand = Candidate(kind, {}, {}, n_options=len(options), options=options)
+    cand = Candidate(kind, {}, {}, n_options=len(options), options=options, lagged=lagged)
     cand.n_params = max(len(regs) for regs, _ in options) + (len(options) > 1)
     cand.refit(whiten, y_d)
     return cand
@@ -609,15 +622,21 @@ def _best_option(
 def _profile_interval(fits: list[SpectralFit], fixed: list[dict[str, float]]) -> dict:
     """95 % profile intervals of a one-coefficient effect searched over options (e.g. τw).
 
-    Option j's whitened residual sum of squares exceeds the best one's by χ²_max − χ²_j (its
-    Wald χ² of the coefficient), and within option j by (a − β_j)²/se_j², so the profile
-    deviance of amplitude a is min_j [χ²_max − χ²_j + (a − β_j)²/se_j²]; the interval is
-    {a : profile ≤ χ²₁(0.95)}, a union over the options within χ²₁(0.95) of the best.  An option
-    parameter's interval is where its profile deviance χ²_max − χ²_j crosses χ²₁(0.95)
-    (:func:`grid_interval`).  Key ``_coefficient``: the coefficient's interval.
+    Option j's profile deviance is its whitened residual sum of squares' excess over the best
+    option's, in the best one's residual variance: D_j = (RSS_j − RSS_min)/s²; within option j
+    the amplitude a adds (a − β_j)²/se_j², so the profile deviance of a is
+    min_j [D_j + (a − β_j)²/se_j²]; the interval is {a : profile ≤ χ²₁(0.95)}, a union over the
+    options within χ²₁(0.95) of the best.  An option parameter's interval is where D_j crosses
+    χ²₁(0.95) (:func:`grid_interval`).  Key ``_coefficient``: the coefficient's interval.
+    The difference of the options' Wald χ² is D_j only for a weak effect: each Wald χ² divides
+    by its own residual variance, so for a strong one (χ² ≫ the series' length) it is D_j
+    times ~χ²/length — measured, a temperature coupling's lag (χ² 14 700 on 1 023 whitened
+    differences): 303 s [302.9, 303.4] by the Wald χ² against seeds scattering ±4 s, by D_j
+    [299.6, 306.3] s (before session 43 the warm-up's τw used the Wald χ²).
     """
-    chi2 = np.array([f.chi2 for f in fits])
-    room = CHI2_95 - (chi2.max() - chi2)
+    rss = np.array([f.rss for f in fits])
+    best = int(np.argmin(rss))
+    room = CHI2_95 - (rss - rss[best]) / fits[best].dispersion
     ok = np.flatnonzero(room >= 0)
     beta = np.array([fits[j].beta[0] for j in ok])
     half = np.sqrt(room[ok] * np.array([fits[j].cov[0, 0] for j in ok]))
@@ -648,16 +667,20 @@ def grid_interval(grid: np.ndarray, room: np.ndarray) -> list[float]:
 def coupling_candidate(
     kind: str, y_d: np.ndarray, aux_d: np.ndarray | None, dt: float, unit: str, whiten: Whitener
 ) -> Candidate | None:
-    """Coupling to an auxiliary channel: its level (and rate), with lag.
+    """Coupling to an auxiliary channel: its level, with its rate, its curvature or a lag.
 
-    Options: lags :data:`LAGS_S` (channel leading) × {level} or {level, d/dt}, and at lag 0
-    {level, (level − its mean)²}; the best by spectral-GLS p-value is kept, Bonferroni-adjusted
-    for the 7 options.  The curvature: a MEMS bias is a polynomial in temperature, and over a
+    Options: {level}, {level, d/dt}, {level, (level − its mean)²}, and the level through a
+    first-order lag of each of :data:`LAGS_S` under a quarter of the record
+    (:class:`LaggedLevel`: the lag is then estimated); the best by spectral-GLS p-value is
+    kept, Bonferroni-adjusted for the options (7 on 2 h, 9 on 12 h; 7 before session 43: the
+    level and level + rate at pure delays of 0, 60 and 300 s, and the curvature).  The rate
+    column also stands for lags shorter than the shortest tested (a lag τ ≈ −coefficient_rate
+    / coefficient).  The curvature: a MEMS bias is a polynomial in temperature, and over a
     lab's ±3 °C a curvature of 3e-5 rad/s/°C² (on 1e-4 rad/s/°C) left a linear coupling's
     correction a residual the noise model read as a bias instability B of 1.45e-4 rad/s
     (truth 0; 2 h at 100 Hz, ``tests/test_odd_inputs.py::test_a_curved_temperature_coupling``).
-    Only at lag 0, the sensor's own temperature: the option costs every coupling's test a
-    Bonferroni factor 7/6 (all lags: 9/6, which lost the weak coupling of
+    Only unlagged, the sensor's own temperature: the option cost every coupling's test a
+    Bonferroni factor 7/6 in session 41 (at every lag 9/6, which lost the weak coupling of
     ``tests/model/test_loop_sim.py::test_temperature_coupling`` seed 17).  The level is
     :func:`coupling_level` (param ``lowpass_s``; ``evidence["level"]`` says which); it reads
     the channel only, so it costs no test.  Params ``reference_level`` (the curvature's
@@ -666,27 +689,134 @@ def coupling_candidate(
     if aux_d is None or np.ptp(aux_d) == 0:
         return None
     level, lowpass_s, level_note = coupling_level(aux_d, dt)
-    rate = np.gradient(level, dt)
-    options = []
-    for lag_s in LAGS_S:
-        k = round(lag_s / dt)
-        if k >= len(y_d) // 4:
-            continue
-        shift = np.concatenate([np.full(k, level[0]), level[: len(level) - k]])
-        dshift = np.concatenate([np.full(k, rate[0]), rate[: len(rate) - k]])
-        fixed = {"lag_s": lag_s, "lowpass_s": lowpass_s}
-        options.append(({"coefficient": shift}, fixed))
-        options.append(({"coefficient": shift, "coefficient_rate": dshift}, fixed))
+    fixed = {"lag_s": 0.0, "lowpass_s": lowpass_s}
     reference = float(level.mean())
-    curved = {"coefficient": level, "coefficient_quadratic": (level - reference) ** 2}
-    options.append((curved, {"lag_s": 0.0, "lowpass_s": lowpass_s, "reference_level": reference}))
-    cand = _best_option(kind, y_d, whiten, options)
+    options = [
+        ({"coefficient": level}, fixed),
+        ({"coefficient": level, "coefficient_rate": np.gradient(level, dt)}, fixed),
+        (
+            {"coefficient": level, "coefficient_quadratic": (level - reference) ** 2},
+            fixed | {"reference_level": reference},
+        ),
+    ]
+    lagged = LaggedLevel(level, dt, len(y_d) * dt)
+    options += [
+        ({"coefficient": lagged.column(lag_s)}, fixed | {"lag_s": lag_s})
+        for lag_s in LAGS_S
+        if lag_s < lagged.max_lag_s / 4
+    ]
+    cand = _best_option(kind, y_d, whiten, options, lagged)
     cand.evidence["level"] = level_note
     cand.evidence["unit"] = (
         f"rate per {unit} (coefficient_rate: per {unit}/s; coefficient_quadratic: per {unit}² "
         f"of the level's departure from reference_level, {unit})"
     )
     return cand
+
+
+def first_order_lag(x: np.ndarray, blocks: float) -> np.ndarray:
+    """``x`` through a first-order lag of time constant ``blocks`` samples, y_i = a y_{i−1} +
+    (1 − a) x_i with a = e^{−1/blocks} (dy/dt = (x − y)/τ, its step response exact at the
+    samples), starting in equilibrium with the first value — scipy.signal's ``lfilter([1 − a],
+    [1, −a], x, zi=[a x_0])`` without importing scipy.signal (0.5–0.8 s).  Closed form per
+    span of samples, y_i = a^i (a y_{s−1} + (1 − a) Σ_{j ≤ i} a^{−j} x_j) (i, j from the span's
+    start s), the spans short enough that a^{−j} stays below e^{:data:`MAX_EXPONENT`}."""
+    span = max(1, int(MAX_EXPONENT * blocks))
+    y = np.empty(len(x))
+    before = float(x[0])
+    for s in range(0, len(x), span):
+        part = np.asarray(x[s : s + span], dtype=float)
+        j = np.arange(len(part)) / blocks
+        y[s : s + len(part)] = np.exp(-j) * (
+            np.exp(-1.0 / blocks) * before - np.expm1(-1.0 / blocks) * np.cumsum(np.exp(j) * part)
+        )
+        before = y[s + len(part) - 1]
+    return y
+
+
+@dataclass(frozen=True)
+class LaggedLevel:
+    """A coupling's level (block means of ``dt`` s) through a first-order thermal lag whose
+    time constant is estimated, up to ``max_lag_s``.
+
+    Heat reaches the sensing element through the package and the mount: a temperature read
+    beside it (a board sensor, a separate topic) leads the bias by the thermal time constant.
+    A pure delay, the model before session 43, fits a lag's slow response but not its
+    attenuation of faster cycles: a gyro's bias following a lab's 25 → 28 °C with a 1 °C,
+    30 min cycle through a 600 s lag (3e-4 rad/s/°C, 2 h at 100 Hz) came out as four effects (a
+    300 s delay with a rate term, a ramp, a 60 s delay, a warm-up).  The coupling's test
+    chooses among the lags :data:`LAGS_S` (a factor √10 apart, each an option of the
+    Bonferroni count); the lag itself is then estimated (:meth:`estimate`), because on a
+    strong coupling a lag off by a factor √2 leaves a residual the loop reads as more effects
+    (measured: 300 s fitted as 240 s left a second coupling and a ramp)."""
+
+    level: np.ndarray
+    dt: float
+    max_lag_s: float
+
+    def column(self, lag_s: float) -> np.ndarray:
+        """The level through a first-order lag of ``lag_s`` s."""
+        return first_order_lag(self.level, lag_s / self.dt)
+
+    def estimate(
+        self,
+        whiten: Whitener,
+        yw: np.ndarray,
+        drift: np.ndarray,
+        fixed: dict[str, float],
+        unlagged: SpectralFit,
+    ) -> tuple[dict[str, np.ndarray], dict[str, float], SpectralFit, dict[str, list[float]]]:
+        """(regressors, params, fit, 95 % profile intervals) of the lag whose GLS fits best.
+
+        The lag minimises the GLS residual sum of squares over :data:`LAG_STEPS_PER_DECADE`
+        lags a decade from :data:`MIN_LAG_S` to ``max_lag_s``, refined between that grid's
+        neighbours (scipy's bounded Brent search in ln lag).  Its 95 % interval is where the
+        profile deviance (the residual's excess over the best, in its residual variance)
+        crosses χ²₁(0.95), found by Brent's root search between the best and the nearest grid
+        lag beyond (linear interpolation between grid points cut the interval short: it held
+        a 600 s lag on 28 of 40 records, the root on 40), censored at the grid's ends.  The
+        coefficient's interval is profiled (:func:`_profile_interval`) over the best, the
+        unlagged level (``unlagged``: the option of the same level without a lag, its fit) and
+        :data:`PROFILE_POINTS` lags across the lag's interval: the grid's own points are too
+        far apart for a strong coupling, whose lag is known to a few per cent and its
+        coefficient correlated with it.  Where the unlagged level lies within χ²₁(0.95) of
+        the best, no lag is needed: the coupling is the unlagged one (``lag_s`` 0, its
+        interval from 0) — a lagged option may still have been the most significant."""
+        decades = np.log10(self.max_lag_s / MIN_LAG_S)
+        u = np.log(
+            np.geomspace(MIN_LAG_S, self.max_lag_s, round(decades * LAG_STEPS_PER_DECADE) + 2)
+        )
+
+        def fit_at(v: float) -> SpectralFit:  # at the lag e^v s
+            return spectral_fit(yw, whiten(self.column(float(np.exp(v)))[:, None]), drift)
+
+        rss = np.array([fit_at(v).rss for v in u])
+        j = int(np.argmin(rss))
+        near = (u[max(j - 1, 0)], u[min(j + 1, len(u) - 1)])
+        found = optimize.minimize_scalar(lambda v: fit_at(v).rss, bounds=near, method="bounded")
+        best_u = float(found.x if found.fun < rss[j] else u[j])
+        best = fit_at(best_u)
+
+        def room(v: float) -> float:  # χ²₁(0.95) − the profile deviance at lag e^v
+            return CHI2_95 - (fit_at(v).rss - best.rss) / best.dispersion
+
+        outside = CHI2_95 - (rss - best.rss) / best.dispersion < 0
+        lag_interval = []
+        for beyond, end in (
+            (u[(u < best_u) & outside][-1:], u[0]),
+            (u[(u > best_u) & outside][:1], u[-1]),
+        ):
+            if beyond.size:  # the crossing between the best and the nearest grid lag outside
+                end = optimize.brentq(room, best_u, beyond[0], xtol=1e-4)
+            lag_interval.append(float(np.exp(end)))
+        within = [fit_at(v) for v in np.linspace(*np.log(lag_interval), PROFILE_POINTS)]
+        coefficient = _profile_interval([best, unlagged, *within], [{}] * (PROFILE_POINTS + 2))
+        intervals = {"coefficient": coefficient["_coefficient"], "lag_s": lag_interval}
+        if (unlagged.rss - best.rss) / best.dispersion <= CHI2_95:  # no lag needed
+            lag_interval[0] = 0.0
+            return {"coefficient": self.level}, fixed | {"lag_s": 0.0}, unlagged, intervals
+        lag_s = float(np.exp(best_u))
+        return {"coefficient": self.column(lag_s)}, fixed | {"lag_s": lag_s}, best, intervals
 
 
 def coupling_level(x: np.ndarray, dt: float) -> tuple[np.ndarray, float, str]:
