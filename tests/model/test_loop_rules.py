@@ -579,25 +579,40 @@ def test_tone_test_reads_a_block_averaged_tone_with_its_amplitude_and_phase():
     assert np.mean(phase) == pytest.approx(0.3, abs=0.04)
 
 
-def test_profile_interval_over_options_is_the_union_within_chi2():
-    """A one-coefficient effect searched over options (warm-up τw): the options whose residual
-    sum of squares exceeds the best one's by at most χ²₁(0.95) = 3.8415 times its residual
-    variance (2 here) each give β ± √(room · var); the interval is their union, and τw's
-    interval is where the room crosses 0 (interpolated in log τw, censored at the grid's
-    end).  The options' Wald χ² (all 50: a strong effect, each divided by its own residual
+def test_profile_interval_over_fits_is_the_union_within_chi2():
+    """A one-coefficient effect fitted at several values of its shape (a warm-up's τw): the
+    fits whose residual sum of squares exceeds the best one's by at most χ²₁(0.95) = 3.8415
+    times its residual variance (2 here) each give β ± √(room · var); the interval is their
+    union.  The fits' Wald χ² (all 50: a strong effect, each divided by its own residual
     variance) is not the profile deviance."""
     fits = [
         effects.SpectralFit(np.array([b]), np.array([[v]]), 50.0, d, 100.0 + 2 * (10.0 - chi2))
         for b, v, chi2, d in ((2.0, 0.25, 10.0, 2.0), (2.5, 0.16, 9.0, 2.1), (1.0, 0.01, 5.9, 2.2))
     ]
-    fixed = [{"warmup_tau_s": 10.0}, {"warmup_tau_s": 20.0}, {"warmup_tau_s": 40.0}]
-    out = effects._profile_interval(fits, fixed)
-    rooms = [3.841458820694124, 2.841458820694124]
+    rooms = [3.841458820694124, 2.841458820694124]  # the third: 3.8415 − 4.1, outside
     lo = min(2.0 - np.sqrt(rooms[0] * 0.25), 2.5 - np.sqrt(rooms[1] * 0.16))
     hi = max(2.0 + np.sqrt(rooms[0] * 0.25), 2.5 + np.sqrt(rooms[1] * 0.16))
-    assert out["_coefficient"] == pytest.approx([lo, hi], rel=1e-12)  # 1.0203, 3.1743
-    w = rooms[1] / (rooms[1] + 0.258541179305876)  # room at 40 s: 3.8415 − 4.1 (outside)
-    assert out["warmup_tau_s"] == pytest.approx([10.0, 20.0 * 2.0**w], rel=1e-12)
+    assert effects._profile_interval(fits) == pytest.approx([lo, hi], rel=1e-12)  # 1.02, 3.17
+
+
+def test_a_warmups_time_constant_is_estimated_with_its_profile_interval() -> None:
+    """40 records (2 h of 1 s blocks, white noise 1e-4) of a 3e-4 warm-up of 600 s: τw is
+    estimated between the grid's 24 options, its 95 % interval holding 600 s on 38 and the
+    amplitude's on 37.  Before session 43 τw's interval was read from the options' Wald χ² at
+    the grid's points: 13 of 40 (the amplitude's 35)."""
+    n = 7200
+    decay = np.exp(-np.arange(n) / 600.0)
+    whiten = effects.Whitener(effects.NoisePsd(1e-8, 0.0, 0.0, 0.0), n, 1.0)
+    tau_held = amplitude_held = 0
+    for seed in range(40):
+        y = 3e-4 * decay + 1e-4 * np.random.default_rng(200 + seed).standard_normal(n)
+        cand = effects.warmup_candidate(y, 1.0, whiten)
+        lo, hi = cand.intervals["warmup_tau_s"]
+        tau_held += lo < 600 < hi
+        lo, hi = cand.intervals["warmup_amplitude"]
+        amplitude_held += lo < 3e-4 < hi
+    assert tau_held >= 37 and amplitude_held >= 36
+    assert cand.params["warmup_tau_s"] not in {o[1]["warmup_tau_s"] for o in cand.options}
 
 
 def test_options_searched_are_counted_in_the_evidence():
@@ -808,10 +823,14 @@ def test_a_lag_the_data_do_not_need_is_reported_as_none() -> None:
     walk = np.cumsum(rng.standard_normal(N_D))
     level = effects.moving_average(walk, 200)  # slow: lags of 10-30 s fit it as well
     y = 0.5 * level + rng.standard_normal(N_D)
-    lagged = effects.LaggedLevel(level, 0.5, N_D * 0.5)
+    family = effects.OptionFamily(
+        "lag_s", lambda lag_s: effects.first_order_lag(level, lag_s / 0.5), 10.0, N_D * 0.5, True
+    )
     yw = whiten(y)
     unlagged = effects.spectral_fit(yw, whiten(level[:, None]), whiten.drift)
-    regs, params, fit, intervals = lagged.estimate(whiten, yw, whiten.drift, {"x": 1.0}, unlagged)
+    zero = ({"coefficient": level}, {"lag_s": 0.0, "x": 1.0}, unlagged)
+    option = ({"coefficient": family.column(30.0)}, {"lag_s": 30.0, "x": 1.0})
+    regs, params, fit, intervals = family.estimate(whiten, yw, whiten.drift, option, zero)
     assert params == {"x": 1.0, "lag_s": 0.0} and fit is unlagged
     assert regs["coefficient"] is level
     assert intervals["lag_s"][0] == 0.0 and 10.0 < intervals["lag_s"][1] < 200.0
