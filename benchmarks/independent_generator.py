@@ -50,9 +50,12 @@ EFFECT_KINDS = (
     "tilt",
     "outliers",
     "vibration",
+    "thermal_lag",
 )
-"""Undeclared effects.  A supply-voltage coupling is not generated: a sensor_msgs/Imu bag
-carries no supply channel (nothing could be coupled to it)."""
+"""Undeclared effects (``thermal_lag``: the temperature coupling through a first-order lag,
+the heat reaching the sensing element after the thermometer).  A supply-voltage coupling is
+not generated: a sensor_msgs/Imu bag carries no supply channel (nothing could be coupled to
+it)."""
 OVERSAMPLE = 8
 """A vibration is generated this many times faster than the sensor's rate and sampled."""
 LN2 = np.log(2.0)
@@ -194,8 +197,9 @@ def add_effect(
     ``size`` scales the effect against the noise where it shows: the effect's amplitude is
     ``size`` × the axis' noise ADEV at the effect's characteristic τ (sinusoid 0.371/f, its
     ADEV peak; Gauss-Markov 1.89 Tc; step/event: their duration or T/10; ramp and warm-up:
-    T/4 and the warm-up time; temperature: half its cycle); outliers: ``size`` × 10 × the
-    white-noise sigma of one sample.  Returns the effect's description (SI units)."""
+    T/4 and the warm-up time; temperature and its thermal lag: half its cycle); outliers:
+    ``size`` × 10 × the white-noise sigma of one sample.  Returns the effect's description
+    (SI units)."""
     n = len(y)
     t = np.arange(n) * tau0
     duration = n * tau0
@@ -257,6 +261,13 @@ def add_effect(
         coef = amp(1800.0) / max(float(temp.std()), 1e-3)
         y[:, a] += coef * (temp - temp.mean())
         out |= {"coefficient_per_degC": coef}
+    elif kind == "thermal_lag":
+        lag = 10 ** rng.uniform(np.log10(300.0), np.log10(1800.0))
+        a_lag = np.exp(-tau0 / lag)  # dT/dt = (temp - T)/lag, exact per sample, from rest
+        lagged = signal.lfilter([1 - a_lag], [1, -a_lag], temp - temp[0]) + temp[0]
+        coef = amp(1800.0) / max(float(lagged.std()), 1e-3)
+        y[:, a] += coef * (lagged - lagged.mean())
+        out |= {"coefficient_per_degC": coef, "lag_s": lag}
     elif kind == "event":
         # a bump of the table: 2-4 axes at once, 1-60 s, a box with cosine-tapered edges
         others = rng.choice([b for b in range(6) if b != a], int(rng.integers(1, 4)), replace=False)

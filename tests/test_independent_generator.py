@@ -68,6 +68,24 @@ def test_effect_is_on_one_axis_and_described():
     assert temp.shape == (9000,) and abs(temp.mean() - 25) < 1.5
 
 
+def test_a_thermal_lag_is_the_temperature_through_a_first_order_lag():
+    """The ``thermal_lag`` effect is c·(T_lag − mean) with dT_lag/dt = (T − T_lag)/lag, from
+    rest: recovered here by a least-squares fit of the ODE's Euler form (not the generator's
+    filter) — each step's change of the effect over the temperature's lead on it is 1/lag."""
+    y, temp, truth = gen.generate(0.5, 10.0, 5, "thermal_lag", 10.0)
+    clean, _, _ = gen.generate(0.5, 10.0, 5)
+    axis = gen.AXES.index(truth.effect["axis"])
+    effect = (y - clean)[:, axis]
+    coef, lag = truth.effect["coefficient_per_degC"], truth.effect["lag_s"]
+    assert 300 <= lag <= 1800 and coef > 0
+    level = effect / coef  # T_lag up to its mean
+    lead = temp[1:] - level[1:]  # up to the same constant: fit it as an offset
+    step = np.diff(level) / 0.1
+    (rate, offset), *_ = np.linalg.lstsq(np.column_stack([lead, np.ones_like(lead)]), step)
+    assert 1 / rate == pytest.approx(lag, rel=0.01)
+    assert np.count_nonzero(np.abs(y - clean).max(axis=0) > 0) == 1
+
+
 def test_bag_decodes_to_the_generated_values(tmp_path: Path):
     y, temp, _ = gen.generate(20 / 3600, 50.0, 4)
     gen.write_bag(tmp_path / "bag", y, temp, 50.0, 1_700_000_000_000_000_000)
