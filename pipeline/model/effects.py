@@ -564,7 +564,7 @@ class Candidate:
             fit = tested = fits[best]
             self.intervals = {}  # the option chosen before may have had other coefficients
             family = self.family
-            if family is not None and fixed.get(family.param, 0.0) > 0:
+            if family is not None and fixed[family.param] > 0:
                 zero = (*self.options[0], fits[0]) if family.zero else None
                 regs, fixed, fit, profiled = family.estimate(
                     whiten, yw, self._drift(whiten), (regs, fixed), zero
@@ -811,8 +811,8 @@ class OptionFamily:
             (u[(u < best_u) & outside][-1:], u[0]),
             (u[(u > best_u) & outside][:1], u[-1]),
         ):
-            if beyond.size:  # the crossing between the best and the nearest grid value outside
-                end = optimize.brentq(room, best_u, beyond[0], xtol=1e-4)
+            for v in beyond:  # the crossing between the best and the nearest grid value outside
+                end = optimize.brentq(room, best_u, v, xtol=1e-4)
             interval.append(float(np.exp(end)))
         fits = [best] + [fit_at(v) for v in np.linspace(*np.log(interval), PROFILE_POINTS)]
         if zero is not None:
