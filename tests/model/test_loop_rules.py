@@ -618,9 +618,9 @@ def test_a_warmups_time_constant_is_estimated_with_its_profile_interval() -> Non
 def test_options_searched_are_counted_in_the_evidence():
     """Bonferroni factor (``n_options``) and parameter count (ΔBIC's k) of the time-domain
     candidates: coupling {level}, {level, its rate} and {level, its square}, and the level
-    through the lags of 30, 95 and 300 s (those under a quarter of the 2048 s record) = 6
-    options, k = 2 coefficients + the choice; warm-up 24 τw, k = amplitude + τw; a step k =
-    size + time."""
+    through the lags of 30, 95 and 300 s (those under a quarter of the record: 2048 s) = 6
+    options, k = 2 coefficients + the choice — on blocks of 2 s (4096 s) the lag of 949 s too;
+    warm-up 24 τw, k = amplitude + τw; a step k = size + time."""
     rng = np.random.default_rng(3)
     whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 1.0)
     y = rng.standard_normal(N_D)
@@ -629,6 +629,8 @@ def test_options_searched_are_counted_in_the_evidence():
     warmup = effects.warmup_candidate(y, 1.0, whiten)
     step = effects.step_candidate(y, 1.0, whiten)
     assert (coupling.n_options, coupling.n_params) == (6, 3)
+    twice = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 2.0)
+    assert effects.coupling_candidate("temperature", y, aux, 2.0, "degC", twice).n_options == 7
     assert (warmup.n_options, warmup.n_params) == (24, 2)
     assert step.n_params == 2
     # τw is profiled over its options (one column each)
