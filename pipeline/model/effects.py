@@ -54,6 +54,7 @@ delay with a rate term, a ramp, a 60 s delay, a warm-up); now one coupling, 617 
 MIN_LAG_S = 10.0  # shortest lag estimated (s): shorter is the rate option's (lag ≈ −c_rate/c)
 STEPS_PER_DECADE = 12  # an :class:`OptionFamily`'s estimate: its grid, then refined
 PROFILE_POINTS = 9  # values across an estimated parameter's interval profiling its coefficient
+XTOL = 1e-3  # an estimated parameter's value and interval ends: to 0.1 % (Brent, in its log)
 MAX_EXPONENT = 500.0  # :func:`first_order_lag`'s spans: e^500 ≈ 1e217, below float64's 1.8e308
 PSD_MAX_SAMPLES = 1 << 24  # longest series of the periodogram line search (psd_line)
 LOWPASS_BLOCKS = 31  # moving average of ADIS TEMP/SUPPLY (coarsely quantised) in blocks
@@ -792,13 +793,19 @@ class OptionFamily:
         decades = np.log10(self.hi / self.lo)
         u = np.log(np.geomspace(self.lo, self.hi, round(decades * STEPS_PER_DECADE) + 2))
 
-        def fit_at(v: float) -> SpectralFit:  # at the value e^v
-            return spectral_fit(yw, whiten(self.column(float(np.exp(v)))[:, None]), drift)
+        def fits_at(v: np.ndarray) -> list[SpectralFit]:  # at the values e^v, whitened at once
+            xw = whiten(np.column_stack([self.column(float(np.exp(w))) for w in v]))
+            return [spectral_fit(yw, xw[:, [k]], drift) for k in range(len(v))]
 
-        rss = np.array([fit_at(v).rss for v in u])
+        def fit_at(v: float) -> SpectralFit:
+            return fits_at(np.array([v]))[0]
+
+        rss = np.array([f.rss for f in fits_at(u)])
         j = int(np.argmin(rss))
         near = (u[max(j - 1, 0)], u[min(j + 1, len(u) - 1)])
-        found = optimize.minimize_scalar(lambda v: fit_at(v).rss, bounds=near, method="bounded")
+        found = optimize.minimize_scalar(
+            lambda v: fit_at(v).rss, bounds=near, method="bounded", options={"xatol": XTOL}
+        )
         best_u = float(found.x if found.fun < rss[j] else u[j])
         best = fit_at(best_u)
 
@@ -812,9 +819,9 @@ class OptionFamily:
             (u[(u > best_u) & outside][:1], u[-1]),
         ):
             for v in beyond:  # the crossing between the best and the nearest grid value outside
-                end = optimize.brentq(room, best_u, v, xtol=1e-4)
+                end = optimize.brentq(room, best_u, v, xtol=XTOL)
             interval.append(float(np.exp(end)))
-        fits = [best] + [fit_at(v) for v in np.linspace(*np.log(interval), PROFILE_POINTS)]
+        fits = [best, *fits_at(np.linspace(*np.log(interval), PROFILE_POINTS))]
         if zero is not None:
             fits.append(zero[2])
         intervals = {name: _profile_interval(fits), self.param: interval}
