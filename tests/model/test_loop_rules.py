@@ -840,6 +840,33 @@ def test_a_lag_the_data_do_not_need_is_reported_as_none() -> None:
     assert lo < 0.5 < hi and lo < unlagged.beta[0] < hi
 
 
+def test_a_lag_is_dropped_within_chi2_of_the_unlagged_level() -> None:
+    """The unlagged level replaces the best lag where its residual exceeds the best's by at
+    most χ²₁(0.95) = 3.84 times the best fit's residual variance (~100 here: the noise 10× what
+    the whitener assumes): 3.5 of them, dropped; 4.2, kept."""
+    rng = np.random.default_rng(6)
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 0.5)
+    walk = np.cumsum(rng.standard_normal(N_D))
+    y = 10 * (0.5 * effects.first_order_lag(walk, 120.0) + rng.standard_normal(N_D))
+    family = effects.OptionFamily(
+        "lag_s", lambda lag_s: effects.first_order_lag(walk, lag_s / 0.5), 10.0, N_D * 0.5, True
+    )
+    yw = whiten(y)
+    option = ({"coefficient": family.column(30.0)}, {"lag_s": 30.0})
+
+    def unlagged(rss: float) -> tuple:
+        fit = effects.SpectralFit(np.array([5.0]), np.array([[0.01]]), 1.0, 1.0, rss)
+        return {"coefficient": walk}, {"lag_s": 0.0}, fit
+
+    _, params, best, _ = family.estimate(whiten, yw, whiten.drift, option, unlagged(np.inf))
+    assert params["lag_s"] == pytest.approx(60.0, rel=0.05) and 50 < best.dispersion < 200
+    for excess, lag_kept in ((3.5, False), (4.2, True)):
+        zero = unlagged(best.rss + excess * best.dispersion)
+        _, params, fit, intervals = family.estimate(whiten, yw, whiten.drift, option, zero)
+        assert (params["lag_s"] > 0) is lag_kept and (fit is zero[2]) is not lag_kept
+        assert (intervals["lag_s"][0] == 0.0) is not lag_kept
+
+
 def test_the_first_order_lag_is_scipys_recursion() -> None:
     """``first_order_lag`` equals ``scipy.signal.lfilter`` of the same recursion started in
     equilibrium, to rounding (the series reaches ±300), over spans short and long (1 to 3000
