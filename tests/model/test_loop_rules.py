@@ -595,6 +595,17 @@ def test_profile_interval_over_fits_is_the_union_within_chi2():
     assert effects._profile_interval(fits) == pytest.approx([lo, hi], rel=1e-12)  # 1.02, 3.17
 
 
+def test_a_warmups_time_constant_is_in_seconds() -> None:
+    """A warm-up of 600 s (amplitude 3, unit white noise) on 2048 blocks of 2 s: τw estimated
+    within 10 % in seconds, its interval holding 600 s."""
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 2.0)
+    y = 3 * np.exp(-np.arange(N_D) * 2.0 / 600) + np.random.default_rng(4).standard_normal(N_D)
+    cand = effects.warmup_candidate(y, 2.0, whiten)
+    assert cand.params["warmup_tau_s"] == pytest.approx(600, rel=0.1)
+    lo, hi = cand.intervals["warmup_tau_s"]
+    assert lo < 600 < hi
+
+
 def test_a_warmups_time_constant_is_estimated_with_its_profile_interval() -> None:
     """40 records (2 h of 1 s blocks, white noise 1e-4) of a 3e-4 warm-up of 600 s: τw is
     estimated between the grid's 24 options, its 95 % interval holding 600 s on 38 and the
