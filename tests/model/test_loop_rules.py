@@ -597,10 +597,13 @@ def test_profile_interval_over_fits_is_the_union_within_chi2():
 
 def test_a_warmups_time_constant_is_in_seconds() -> None:
     """A warm-up of 600 s (amplitude 3, unit white noise) on 2048 blocks of 2 s: τw estimated
-    within 10 % in seconds, its interval holding 600 s."""
+    within 10 % in seconds, its interval holding 600 s; the options from 30 blocks (60 s) to a
+    third of the record."""
     whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), N_D, 2.0)
     y = 3 * np.exp(-np.arange(N_D) * 2.0 / 600) + np.random.default_rng(4).standard_normal(N_D)
     cand = effects.warmup_candidate(y, 2.0, whiten)
+    taus = [fixed["warmup_tau_s"] for _, fixed in cand.options]
+    assert taus[0] == 60.0 and taus[-1] == pytest.approx((N_D - 1) * 2.0 / 3)
     assert cand.params["warmup_tau_s"] == pytest.approx(600, rel=0.1)
     lo, hi = cand.intervals["warmup_tau_s"]
     assert lo < 600 < hi
