@@ -81,7 +81,7 @@ def test_a_thermal_lag_is_the_temperature_through_a_first_order_lag():
     level = effect / coef  # T_lag up to its mean
     lead = temp[1:] - level[1:]  # up to the same constant: fit it as an offset
     step = np.diff(level) / 0.1
-    (rate, offset), *_ = np.linalg.lstsq(np.column_stack([lead, np.ones_like(lead)]), step)
+    (rate, _), *_ = np.linalg.lstsq(np.column_stack([lead, np.ones_like(lead)]), step)
     assert 1 / rate == pytest.approx(lag, rel=0.01)
     assert np.count_nonzero(np.abs(y - clean).max(axis=0) > 0) == 1
 
