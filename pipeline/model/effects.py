@@ -565,7 +565,7 @@ class Candidate:
             fit = tested = fits[best]
             self.intervals = {}  # the option chosen before may have had other coefficients
             family = self.family
-            if family is not None and fixed[family.param] > 0:
+            if family is not None and fixed[family.param] > 0 and family.hi > family.lo:
                 zero = (*self.options[0], fits[0]) if family.zero else None
                 regs, fixed, fit, profiled = family.estimate(
                     whiten, yw, self._drift(whiten), (regs, fixed), zero
@@ -751,7 +751,9 @@ class OptionFamily:
     lag, a warm-up's time constant): ``column(value)``, estimated between ``lo`` and ``hi``.
 
     The test searches a grid of options (each one of the Bonferroni count); the chosen option
-    is then estimated with the parameter free (:meth:`estimate`): on a strong effect a shape
+    is then estimated with the parameter free (:meth:`estimate`; not where ``hi`` ≤ ``lo``: a
+    warm-up's τw on a record of under 90 blocks, whose grid runs from 30 blocks down to a
+    third of it): on a strong effect a shape
     off by a grid step leaves a residual the loop reads as more effects (a coupling through a
     300 s lag fitted as 240 s left a second coupling and a ramp), and the grid's points are
     too far apart to bound the parameter.  ``zero``: the candidate's first option is the
@@ -1020,7 +1022,7 @@ def warmup_candidate(y_d: np.ndarray, dt: float, whiten: Whitener) -> Candidate:
     options = [
         ({"warmup_amplitude": decay(tau_w)}, {"warmup_tau_s": float(tau_w)}) for tau_w in grid
     ]
-    family = OptionFamily("warmup_tau_s", decay, grid[0], grid[-1])
+    family = OptionFamily("warmup_tau_s", decay, grid[0], grid[-1])  # none under 90 blocks
     cand = _best_option("rate_ramp", y_d, whiten, options, family)
     cand.evidence["note"] = "linear drift: the model's rate_ramp term R"
     return cand

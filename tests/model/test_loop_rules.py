@@ -609,6 +609,16 @@ def test_a_warmups_time_constant_is_in_seconds() -> None:
     assert lo < 600 < hi
 
 
+def test_a_warmup_on_a_record_too_short_for_its_grid_keeps_its_option() -> None:
+    """60 blocks: the τw grid runs from 30 blocks down to a third of the record (19.7), so τw
+    is not estimated between its ends (the geometric grid had −4 points: a hypothesis-found
+    3 s bag crashed): the option chosen is the estimate."""
+    whiten = effects.Whitener(effects.NoisePsd(1.0, 0.0, 1.0, 0.0), 60, 1.0)
+    y = np.random.default_rng(5).standard_normal(60)
+    cand = effects.warmup_candidate(y, 1.0, whiten)
+    assert cand.params["warmup_tau_s"] in {fixed["warmup_tau_s"] for _, fixed in cand.options}
+
+
 def test_a_warmups_time_constant_is_estimated_with_its_profile_interval() -> None:
     """40 records (2 h of 1 s blocks, white noise 1e-4) of a 3e-4 warm-up of 600 s: τw is
     estimated between the grid's 24 options, its 95 % interval holding 600 s on 38 and the
