@@ -677,9 +677,9 @@ def coupling_candidate(
     Options: {level}, {level, d/dt}, {level, (level − its mean)²}, and the level through a
     first-order lag (:func:`first_order_lag`) of each of :data:`LAGS_S` under a quarter of the
     record (the lag then estimated up to the record's length: :class:`OptionFamily`, see
-    :data:`LAGS_S` for why a lag); the best by spectral-GLS p-value is
-    kept, Bonferroni-adjusted for the options (7 on 2 h, 9 on 12 h; 7 before session 43: the
-    level and level + rate at pure delays of 0, 60 and 300 s, and the curvature).  The rate
+    :data:`LAGS_S` for why a lag); the best by spectral-GLS p-value is kept,
+    Bonferroni-adjusted for the options (7 on 2 h, 9 on 12 h; 7 before session 43: the level
+    and level + rate at pure delays of 0, 60 and 300 s, and the curvature).  The rate
     column also stands for lags shorter than the shortest tested (a lag τ ≈ −coefficient_rate
     / coefficient).  The curvature: a MEMS bias is a polynomial in temperature, and over a
     lab's ±3 °C a curvature of 3e-5 rad/s/°C² (on 1e-4 rad/s/°C) left a linear coupling's
@@ -751,13 +751,13 @@ class OptionFamily:
     lag, a warm-up's time constant): ``column(value)``, estimated between ``lo`` and ``hi``.
 
     The test searches a grid of options (each one of the Bonferroni count); the chosen option
-    is then estimated with the parameter free (:meth:`estimate`; not where ``hi`` ≤ ``lo``: a
-    warm-up's τw on a record of under 90 blocks, whose grid runs from 30 blocks down to a
-    third of it): on a strong effect a shape
+    is then estimated with the parameter free (:meth:`estimate`): on a strong effect a shape
     off by a grid step leaves a residual the loop reads as more effects (a coupling through a
     300 s lag fitted as 240 s left a second coupling and a ramp), and the grid's points are
-    too far apart to bound the parameter.  ``zero``: the candidate's first option is the
-    family's limit at 0 (the level without a lag), reported where the data do not need more."""
+    too far apart to bound the parameter.  Not where ``hi`` ≤ ``lo`` (a warm-up's τw on a
+    record of under 90 blocks, whose grid runs from 30 blocks down to a third of it).
+    ``zero``: the candidate's first option is the family's limit at 0 (the level without a
+    lag), reported where the data do not need more."""
 
     param: str
     column: Callable[[float], np.ndarray]
