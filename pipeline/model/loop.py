@@ -1368,7 +1368,7 @@ def _lagged(cand: effects.Candidate) -> bool:
     of the level itself are different numbers, which :func:`_hull` must not mix (a 600 s lag
     found at 2.93e-4 [2.71, 3.18]e-4 rad/s/°C, K's bound choosing the level itself, reported
     [0.55, 3.18]e-4)."""
-    return cand.params.get("lag_s", 0.0) > 0
+    return cand.params["lag_s"] > 0
 
 
 def _hull(intervals: dict, others: dict) -> dict:
