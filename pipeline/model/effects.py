@@ -651,22 +651,25 @@ def _profile_interval(fits: list[SpectralFit]) -> list[float]:
     return [float(np.min(beta - half)), float(np.max(beta + half))]
 
 
-def grid_interval(grid: np.ndarray, room: np.ndarray) -> list[float]:
-    """Interval of a parameter searched over a geometric ``grid``, from its profile ``room``
-    (χ² threshold minus the profile deviance; ≥ 0 inside): the edges are where ``room``
-    crosses 0, linearly interpolated in log(grid) between the outermost point inside and its
-    neighbour outside — the grid points inside alone would shrink the interval by up to one
-    grid step.  An edge at the grid's end is censored there."""
+def crossing_interval(
+    u: np.ndarray, room: np.ndarray, room_at: Callable[[float], float]
+) -> list[float]:
+    """95 % interval of a positive parameter searched at the values e^u (``u`` ascending), from
+    its profile ``room`` there (χ²₁(0.95) minus the profile deviance; ≥ 0 inside) and at any
+    log value (``room_at``): each edge where the room crosses 0, by Brent's root search (to
+    :data:`XTOL` in the log) between the outermost value inside and its neighbour outside;
+    censored at the grid's ends.  Linear interpolation between grid points cuts the interval
+    short, the chord of a concave room lying under it: on 40 records of a coupling through a
+    600 s lag it held the lag on 28, the root on 40; on 63 strong Gauss–Markov effects of the
+    independent generator (2 h, 100 Hz) a grid of ×1.24 steps held Tc on 56."""
     ok = np.flatnonzero(room >= 0)
-    log_grid = np.log(grid)
     edges = []
     for inside, outside in ((ok[0], ok[0] - 1), (ok[-1], ok[-1] + 1)):
-        if not 0 <= outside < len(grid):
-            edges.append(log_grid[inside])
-            continue
-        w = room[inside] / (room[inside] - room[outside])
-        edges.append(log_grid[inside] + w * (log_grid[outside] - log_grid[inside]))
-    return [float(np.exp(min(edges))), float(np.exp(max(edges)))]
+        edge = u[inside]
+        if 0 <= outside < len(u):
+            edge = optimize.brentq(room_at, u[inside], u[outside], xtol=XTOL)
+        edges.append(float(np.exp(edge)))
+    return edges
 
 
 def coupling_candidate(
@@ -781,13 +784,12 @@ class OptionFamily:
         values a decade from ``lo`` to ``hi``, refined between that grid's neighbours (scipy's
         bounded Brent search in its logarithm).  Its 95 % interval is where the profile
         deviance (the residual's excess over the best, in its residual variance) crosses
-        χ²₁(0.95), found by Brent's root search between the best and the nearest grid value
-        beyond, censored at the grid's ends (linear interpolation between grid points cut the
-        interval short: on 40 records of a coupling through a 600 s lag it held the lag on 28,
-        the root on 40).  The coefficient's interval is profiled (:func:`_profile_interval`)
-        over the best, the zero limit and :data:`PROFILE_POINTS` values across the parameter's
-        interval: the grid's own points are too far apart for a strong effect, whose shape is
-        known to a few per cent and its coefficient correlated with it.  Where the zero limit
+        χ²₁(0.95), found by Brent's root search beside the outermost grid value inside
+        (:func:`crossing_interval`).  The coefficient's interval is profiled
+        (:func:`_profile_interval`) over the best, the zero limit and :data:`PROFILE_POINTS`
+        values across the parameter's interval: the grid's own points are too far apart for a
+        strong effect, whose shape is known to a few per cent and its coefficient correlated
+        with it.  Where the zero limit
         lies within χ²₁(0.95) of the best, the data do not need the parameter: the fit is the
         zero limit's (its interval from 0), although an option of the family was the most
         significant."""
@@ -814,15 +816,10 @@ class OptionFamily:
         def room(v: float) -> float:  # χ²₁(0.95) − the profile deviance at e^v
             return CHI2_95 - (fit_at(v).rss - best.rss) / best.dispersion
 
-        outside = CHI2_95 - (rss - best.rss) / best.dispersion < 0
-        interval = []
-        for beyond, end in (
-            (u[(u < best_u) & outside][-1:], u[0]),
-            (u[(u > best_u) & outside][:1], u[-1]),
-        ):
-            for v in beyond:  # the crossing between the best and the nearest grid value outside
-                end = optimize.brentq(room, best_u, v, xtol=XTOL)
-            interval.append(float(np.exp(end)))
+        searched = np.append(u, best_u)
+        order = np.argsort(searched)
+        rooms = CHI2_95 - (np.append(rss, best.rss) - best.rss) / best.dispersion
+        interval = crossing_interval(searched[order], rooms[order], room)
         fits = [best, *fits_at(np.linspace(*np.log(interval), PROFILE_POINTS))]
         if zero is not None:
             fits.append(zero[2])

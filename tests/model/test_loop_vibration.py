@@ -637,7 +637,11 @@ def test_a_spread_line_near_nyquist_is_one_line(paper_gyro):
     within 2 %.  The periodogram's strongest line and the shoulders of the line already modelled
     refined back onto it: a second line at the same centre, 2.9 Hz wide, was accepted.  So near
     Nyquist an AR(2)'s spectrum is no oscillator's (Whittle dispersion 5.0 >
-    ``WHITTLE_WIDTH_DISPERSION``): the width is the AVAR's, 1.23 Hz."""
+    ``WHITTLE_WIDTH_DISPERSION``): the width is the AVAR's, 1.47 Hz [1.26, 1.68] around the
+    AR(2)'s half-power bandwidth f0/Q = 1.55 Hz; before session 44 the grid's point nearest
+    the best, 1.23 Hz [1.16, 1.24] (the widths step by ×2.3).  N is not pinned: 0.61× the
+    truth (0.83× at 1.23 Hz) — the oscillator's AVAR tail, white noise to the fit, is not the
+    sensor-rate AR(2)'s."""
     tau0, n, f0 = 0.01, 360_000, 31.0
     rng = np.random.default_rng(1)
     w = paper_gyro.n / np.sqrt(tau0)
@@ -653,7 +657,9 @@ def test_a_spread_line_near_nyquist_is_one_line(paper_gyro):
     assert line.params["frequency_hz"] == pytest.approx(31.2, abs=0.05)
     assert line.evidence["spectrum_centre"]["dispersion"] > loop.WHITTLE_WIDTH_DISPERSION
     assert line.evidence["spectrum_centre"]["width_from"] == "avar"
-    assert line.params["width_hz"] == pytest.approx(1.23, rel=0.02)
+    assert line.params["width_hz"] == pytest.approx(1.47, rel=0.02)
+    lo, hi = line.intervals["width_hz"]
+    assert lo < f0 / 20 < hi
     assert line.params["rms"] == pytest.approx(5 * w, rel=0.02)
 
 
