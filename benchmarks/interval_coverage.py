@@ -22,6 +22,13 @@ to be below the truth on 16 % of axes) and as the report gives it (R released on
 data ask for it, ``ieee952.release_rate_ramp``, the points' correlation in the interval: the
 sandwich factor); the median K is the report's.
 
+``gm_coverage``: records of the independent generator (``independent_generator.py``, which
+shares no code with imupipe) with a Gauss–Markov effect of ``--size`` on one axis, that axis
+analysed as ``imupipe analyze`` does (``axis_result``, the closed loop): how often the effect
+is found, and how often its Tc's and σ's 95 % intervals hold the truth, with the spread of the
+standardised errors (the error over its interval's half-width on its side, × 1.96: 1 when the
+intervals are calibrated).
+
 ``panel``: for every axis of a ``loop_validation.py --jsonl`` file, the chance that an
 efficient unbiased estimate of B (spread at the Cramér–Rao bound, Gaussian) lies within 15 %
 of the truth, summed over the panel, against the measured count.
@@ -30,6 +37,7 @@ of the truth, summed over the panel, against the measured count.
     python benchmarks/interval_coverage.py coverage --records 40 --samples 4320000 --b 0
     python benchmarks/interval_coverage.py k_coverage --records 60 --hours 12 --n 3e-4
     python benchmarks/interval_coverage.py precision
+    python benchmarks/interval_coverage.py gm_coverage --records 80 --size 10 --jobs 2
     python benchmarks/interval_coverage.py panel long_clean.jsonl
 """
 
@@ -37,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -224,6 +233,46 @@ def precision(hours: float = 12.0) -> None:
                   f"{100 * bound[k]:.2f} % (Cramér-Rao)")  # fmt: skip
 
 
+def gm_one(seed: int, hours: float, size: float) -> tuple[dict, list[dict]]:
+    """(the generator's effect, the (params, intervals) of every Gauss–Markov effect the loop
+    accepted on its axis) of recording ``seed``."""
+    import independent_generator as gen  # beside this file
+
+    from imupipe.analysis.analyze import axis_result
+    from imupipe.vocab import AXES
+
+    y, _, truth = gen.generate(hours, 1 / TAU0, seed, "gauss_markov", size)
+    axis = truth.effect["axis"]
+    x = y[:, AXES.index(axis)] - (9.80665 if axis == "accel_z" else 0.0)
+    (curve,) = allan_curves([x], TAU0, tau_factors(len(x)))
+    result = axis_result(axis, x, curve, TAU0, None, None, True)
+    found = [(e.params, e.intervals) for e in result.loop.accepted if e.kind == "gauss_markov"]
+    return truth.effect, found
+
+
+def gm_coverage(records: int, hours: float, size: float, jobs: int) -> None:
+    """Tc's and σ's interval coverage over ``records`` recordings (seeds 440000…) of
+    :func:`gm_one`."""
+    seeds = range(440_000, 440_000 + records)
+    with ProcessPoolExecutor(jobs) as pool:
+        done = list(pool.map(gm_one, seeds, [hours] * records, [size] * records))
+    z = {"tau_c_s": [], "sigma": []}
+    for effect, found in done:
+        for params, intervals in found[:1]:
+            for name, zs in z.items():
+                lo, hi = np.log(intervals[name])
+                est, truth = np.log(params[name]), np.log(effect[name])
+                with np.errstate(divide="ignore"):  # an interval censored at its estimate
+                    zs.append(1.96 * (truth - est) / ((hi if truth > est else lo) - est))
+    n = len(z["sigma"])
+    print(f"{records} recordings of {hours:g} h, size {size:g}: Gauss-Markov found on {n}")
+    for name, zs in z.items():
+        zs = np.array(zs)
+        spread = np.sqrt(np.mean(zs**2))
+        print(f"  {name}: interval holds the truth on {np.sum(zs <= 1.96)} of {n}; "
+              f"standardised error spread {spread:.2f} (calibrated: 1)")  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -239,6 +288,11 @@ def main() -> None:
     kcov.add_argument("--b", type=float, default=2e-5, help="flicker B (rad/s)")
     kcov.add_argument("--k-share", type=float, default=10.0, help="K's AVAR at T/2 / plateau")
     sub.add_parser("precision")
+    gm = sub.add_parser("gm_coverage")
+    gm.add_argument("--records", type=int, default=80)
+    gm.add_argument("--hours", type=float, default=2.0)
+    gm.add_argument("--size", type=float, default=10.0)
+    gm.add_argument("--jobs", type=int, default=2)
     pan = sub.add_parser("panel")
     pan.add_argument("jsonl", type=Path, help="a loop_validation.py --jsonl file")
     args = ap.parse_args()
@@ -248,6 +302,8 @@ def main() -> None:
         k_coverage(args.records, args.hours, args.n, args.b, args.k_share)
     elif args.command == "panel":
         panel(args.jsonl)
+    elif args.command == "gm_coverage":
+        gm_coverage(args.records, args.hours, args.size, args.jobs)
     else:
         precision()
 
