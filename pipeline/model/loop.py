@@ -768,31 +768,35 @@ def _with_shape(spec: tuple, i: int, value: float) -> tuple:
 def _shape_refined(
     kind: str, fits: list[tuple[tuple, ieee952.CompositeFit]], fit_at: Callable
 ) -> list[tuple[tuple, ieee952.CompositeFit]]:
-    """``fits`` with the best's continuous shape parameter (:data:`SHAPE_PARAMETER`: a
-    Gauss–Markov Tc, a prefilter's length, a line's width) at the deviance's least between the
-    grid's neighbours of the best (scipy's bounded Brent search in its log, to
-    :data:`effects.XTOL`), the other shape parameters at the best's; unchanged where the grid
-    has one value or its best is no worse.  The grids step by ×1.2–1.4, and a strong effect's
-    Tc is known within a few per cent: on 63 strong Gauss–Markov effects of the independent
-    generator (2 h, 100 Hz), Tc read on the grid was within its interval on 56."""
+    """``fits`` with, for each value of the other shape parameters (a prefilter's family), the
+    best's continuous shape parameter (:data:`SHAPE_PARAMETER`: a Gauss–Markov Tc, a
+    prefilter's length, a line's width) at the deviance's least between the grid's neighbours
+    of that best (scipy's bounded Brent search in its log, to :data:`effects.XTOL`); none where
+    the grid has one value or its best is no worse.  The grids step by ×1.2–1.4, and a strong
+    effect's Tc is known within a few per cent: on 63 strong Gauss–Markov effects of the
+    independent generator (2 h, 100 Hz), Tc read on the grid was within its interval on 56.
+    Each family is refined: a 4-sample moving average at 100 Hz, between its grid's lengths,
+    was a Bartlett window's best grid point."""
     i = SHAPE_PARAMETER[kind][0]
-    spec, fit = _best(fits)
-    same = _with_shape(spec, i, 0.0)
-    values = np.unique([s[i] for s, _ in fits if _with_shape(s, i, 0.0) == same])
-    j = int(np.searchsorted(values, spec[i]))
-    near = np.log(values[[max(j - 1, 0), min(j + 1, len(values) - 1)]])
-    if near[0] == near[1]:
-        return fits
-    found = optimize.minimize_scalar(
-        lambda u: fit_at(_with_shape(spec, i, float(np.exp(u)))).deviance,
-        bounds=tuple(near),
-        method="bounded",
-        options={"xatol": effects.XTOL},
-    )
-    if found.fun >= fit.deviance:
-        return fits
-    best = _with_shape(spec, i, float(np.exp(found.x)))
-    return [*fits, (best, fit_at(best))]
+    refined = []
+    for family in dict.fromkeys(_with_shape(s, i, 0.0) for s, _ in fits):
+        own = [(s, f) for s, f in fits if _with_shape(s, i, 0.0) == family]
+        spec, fit = _best(own)
+        values = np.unique([s[i] for s, _ in own])
+        j = int(np.searchsorted(values, spec[i]))
+        near = np.log(values[[max(j - 1, 0), min(j + 1, len(values) - 1)]])
+        if near[0] == near[1]:
+            continue
+        found = optimize.minimize_scalar(
+            lambda u, spec=spec: fit_at(_with_shape(spec, i, float(np.exp(u)))).deviance,
+            bounds=tuple(near),
+            method="bounded",
+            options={"xatol": effects.XTOL},
+        )
+        if found.fun < fit.deviance:
+            best = _with_shape(spec, i, float(np.exp(found.x)))
+            refined.append((best, fit_at(best)))
+    return [*fits, *refined]
 
 
 def _best(fits: list[tuple[tuple, ieee952.CompositeFit]]) -> tuple[tuple, ieee952.CompositeFit]:
@@ -1072,12 +1076,11 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         if chosen is None:
             break
         rejected.pop(chosen.trial.kind, None)
-        if chosen.trial.fit_start is not None:  # a short-τ line: the range grows from here on
+        if chosen.trial.fit_start is not None:  # a short-τ term: the range grows from here on
             ax.tau_min, note = chosen.trial.fit_start
-            lines = [c for c in (chosen.trial.cand, chosen.trial.joint) if c is not None]
-            hz = " and ".join(f"{c.params['frequency_hz']:.4g} Hz" for c in lines)
-            ax.fit_note = f"{note} (with the {hz} narrowband line{'s' * (len(lines) > 1)} "
-            ax.fit_note += "below the baseline's fit start modelled)"
+            terms = [c for c in (chosen.trial.cand, chosen.trial.joint) if c is not None]
+            ax.fit_note = f"{note} (with {_short_terms(terms)} below the baseline's fit start "
+            ax.fit_note += "modelled)"
             good = goodness(state.fit(ax), tau, state.avar, edf)  # error before, same τ
         state = chosen.trial.state
         new_fit = state.fit(ax)
@@ -1342,7 +1345,8 @@ def _evaluate(ax: _Axis, state: _State, fit, good) -> list[Decision]:
         )
     harmonic = _harmonic_trial(ax, state, (fit, good), errors)
     short = _short_line_trial(ax, state)
-    extra = [t for t in (harmonic, short) if t is not None]
+    prefilter = _prefilter_below_trial(ax, state)
+    extra = [t for t in (harmonic, short, prefilter) if t is not None]
     return [_decide(t) for t in trials + extra]
 
 
@@ -1867,6 +1871,51 @@ def _short_line_judged(
                  fit_start=(tau_min, note) if widens else None)  # fmt: skip
 
 
+def _short_terms(cands: list[effects.Candidate]) -> str:
+    """The fit note's name of the terms modelled below the baseline's fit start: "the 9.99 Hz
+    narrowband line", "the 12 and 31 Hz narrowband lines", "the 0.16 s moving_average
+    prefilter"."""
+    if cands[0].kind == "prefilter":
+        return f"the {cands[0].params['length_s']:.3g} s {cands[0].params['filter']} prefilter"
+    hz = " and ".join(f"{c.params['frequency_hz']:.4g} Hz" for c in cands)
+    return f"the {hz} narrowband line{'s' * (len(cands) > 1)}"
+
+
+def _prefilter_below_trial(ax: _Axis, state: _State) -> Trial | None:
+    """The sensor's prefilter below the fit start (issue 13 item 4): white noise through a
+    moving average, a Bartlett window or a first-order low-pass falls under N/√τ at τ up to
+    about its length, where :func:`ieee952.fit_start` cuts the baseline's range (its signed
+    1/τ² term holds only from there: a 16-sample moving average at 100 Hz left τ 0.01–0.15 s
+    out of the fit).  Searched over its grid (:func:`_grids`) on the range from the first τ,
+    its length estimated between the grid's points (:func:`_shape_refined`), and judged as a
+    line below the fit start (:func:`_short_line_judged`) on the range the fit start chooses
+    with it.  ``None`` when the fit already starts at the first τ (the prefilter is then the
+    in-range candidate of :func:`_evaluate`), a prefilter is modelled, or it does not widen the
+    range."""
+    tau = ax.tau
+    name = _column_name("prefilter", state)
+    if name is None or ax.tau_min <= tau[0] * (1 + 1e-9):
+        return None
+    full = _with_start(ax, float(tau[0]))
+    fit_at = _column_fitter(
+        tau, state.avar, ax.edf, full.tau_min, state.columns, "prefilter", state.n_nonlinear,
+        state.fit(full).cutoff_hz, ax.dense_from, tau0=ax.sig.tau0,
+    )  # fmt: skip
+    specs = _grids(full, state)["prefilter"]
+    fits = _shape_refined("prefilter", [(spec, fit_at(spec)) for spec in specs], fit_at)
+    spec, fit_new = _best(fits)
+    cand = _column_candidate("prefilter", spec, fit_new, state, full)
+    new_state = state.with_column(name, cand)
+    tau_min, note = _fit_start_with(ax, state, new_state)
+    if not tau_min < ax.tau_min * (1 - 1e-9):
+        return None
+    wide, dbic, flags_ok = _judged_from(ax, state, new_state, tau_min, N_SHAPE["prefilter"] + 1)
+    _judged_evidence(ax, state, cand, _Searched(fits, fit_at), dbic, tau_min)
+    holdout = partial(_holdout_column, wide, state, cand)
+    return Trial(f"{name} below the fit start", cand, float(dbic - DELTA_BIC), flags_ok,
+                 new_state, holdout, fit_start=(tau_min, note))  # fmt: skip
+
+
 def _fit_start_with(ax: _Axis, state: _State, new_state: _State) -> tuple[float, str]:
     """(τ s, note): where :func:`ieee952.fit_start` starts the fit of ``state``'s Allan
     variance with ``new_state``'s columns (a line below the fit start added)."""
@@ -1901,13 +1950,13 @@ def _judged_evidence(
     dbic: float,
     tau_min: float,
 ) -> None:
-    """A short-τ line's evidence after :func:`_judged_from`: its ΔBIC and the fit starts
-    before and with it, and where significant its profile intervals over the ``searched``
-    fits and the spectrum's view (:func:`_spectrum_view`)."""
+    """A short-τ term's evidence after :func:`_judged_from` (a line, a prefilter): its ΔBIC
+    and the fit starts before and with it, and where significant its profile intervals over
+    the ``searched`` fits and the spectrum's view (:func:`_spectrum_view`)."""
     cand.evidence |= {"avar_delta_bic": dbic, "fit_start_s": [ax.tau_min, tau_min]}
     if dbic >= DELTA_BIC:
         cand.intervals |= _column_profile(
-            "narrowband", searched, state.avar, ax.edf, (ax.sig.tau0, ax.n_terms)
+            cand.kind, searched, state.avar, ax.edf, (ax.sig.tau0, ax.n_terms)
         )
         cand.evidence |= _spectrum_view(ax, state, cand)
 

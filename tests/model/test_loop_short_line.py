@@ -1,7 +1,8 @@
 """A narrowband line below the baseline's fit start (issue 13): the ADIS16405 accelerometers
 carry a ≈ 10 Hz vibration whose AVAR hump lies at τ 0.02–0.04 s, where :func:`fit_start` had
 cut the fit off.  The loop searches such a line from the first τ, chooses the fit start again
-with it, and judges it on that wider range; a clean (or only prefiltered) axis gets no line.
+with it, and judges it on that wider range; a clean axis gets no line, and a prefiltered one
+its prefilter (session 44), searched the same way.
 
 Synthetic stand-ins: 44 min of white noise at 100 Hz, with a damped-oscillator line at 10 Hz
 (width 0.5 Hz, rms 0.3× the white samples' — the real line is ≈ 0.2–0.3×) or through the ADIS
@@ -11,6 +12,7 @@ Bartlett prefilter.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy import signal
 
 from imupipe.model.loop import AxisSignals, close_loop
@@ -55,16 +57,47 @@ def test_line_below_the_fit_start_is_modelled_and_the_range_grows_to_tau0():
     assert model["error_before"] == res.before.error
 
 
-def test_prefiltered_white_noise_gets_no_line_below_its_fit_start():
+def test_prefiltered_white_noise_gets_its_prefilter_not_a_line_below_its_fit_start():
+    """The ADIS Bartlett prefilter (two 4-sample moving averages, L = 0.04 s) cuts the
+    baseline's fit at 0.04 s; until session 44 the short τ stayed out of the fit (no term
+    explained them).  Now the prefilter is searched from the first τ like a line: a Bartlett
+    window of 0.0387 s [0.0151, 0.0532], the fit from τ0, adequate (its error 2521 → 2.58 on
+    the wider range), N within 0.5 % of the truth (3e-3 m/s²/√Hz)."""
     rng = np.random.default_rng(4)
     k = np.convolve(np.ones(4), np.ones(4))  # Bartlett, 7 taps
     y = SIGMA * signal.lfilter(k / k.sum(), [1.0], rng.standard_normal(N))
     res = run(y)
     assert res.terms_before.fit_tau_min_s == 0.04
-    assert res.accepted == []
-    assert res.terms_after.fit_tau_min_s == 0.04
-    assert res.error_before_final_range is None  # the range did not change
-    assert res.as_model_dict()["error_before_final_range"] is None
+    (found,) = res.accepted
+    assert found.kind == "prefilter" and found.params["filter"] == "bartlett"
+    assert found.params["length_s"] == pytest.approx(0.0387, rel=0.01)
+    lo, hi = found.intervals["length_s"]
+    assert lo < 0.04 < hi < 0.06
+    assert found.evidence["fit_start_s"] == [0.04, 0.01]
+    assert res.terms_after.fit_tau_min_s == 0.01
+    assert "0.0387 s bartlett prefilter below the baseline's fit start" in res.terms_after.fit_note
+    assert res.error_before_final_range == found.error_before > 1000
+    assert found.error_after < 3 and res.after.p_value > 0.01
+    assert res.terms_after.random_walk.value == pytest.approx(SIGMA * np.sqrt(TAU0), rel=0.005)
+
+
+def test_a_moving_average_prefilter_below_the_fit_start_is_its_length():
+    """A 16-sample moving average (L = 0.16 s, the length the fit started at): the model
+    before left τ 0.01–0.15 s out; now a moving average of 0.161 s [0.157, 0.165], the fit
+    from τ0, adequate, N within 0.2 % and inside its interval (seed 4)."""
+    rng = np.random.default_rng(4)
+    y = SIGMA * signal.lfilter(np.ones(16) / 16, [1.0], rng.standard_normal(N))
+    res = run(y)
+    assert res.terms_before.fit_tau_min_s == 0.16
+    (found,) = res.accepted
+    assert found.params["filter"] == "moving_average"
+    assert found.params["length_s"] == pytest.approx(0.1612, rel=0.005)
+    lo, hi = found.intervals["length_s"]
+    assert 0.155 < lo < 0.16 < hi < 0.167
+    assert res.terms_after.fit_tau_min_s == 0.01 and res.after.p_value > 0.1
+    n = res.terms_after.random_walk
+    assert n.value == pytest.approx(SIGMA * np.sqrt(TAU0), rel=0.002)
+    assert n.lo < SIGMA * np.sqrt(TAU0) < n.hi
 
 
 def test_an_effect_that_leaves_the_range_as_it_was_gives_no_second_error_before():
