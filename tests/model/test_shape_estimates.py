@@ -50,6 +50,35 @@ def test_an_interval_ends_where_a_concave_room_crosses_zero() -> None:
     assert lo == pytest.approx(100.0 * np.exp(0.05 - half), rel=2e-3)
 
 
+@pytest.mark.parametrize("at", [1, -2])
+def test_an_interval_crossing_beside_the_grids_end_is_found_not_censored(at: int) -> None:
+    """The room crosses 0 between the grid's end and its neighbour inside (index 1, or the
+    last but one): Brent's root there, not the grid's end."""
+    u = np.log(np.geomspace(1.0, 100.0, 9))
+
+    def room_at(v: float) -> float:
+        return CHI2_95 - ((v - u[at]) / 0.2) ** 2
+
+    lo, hi = effects.crossing_interval(u, np.array([room_at(v) for v in u]), room_at)
+    half = 0.2 * np.sqrt(CHI2_95)
+    assert [lo, hi] == pytest.approx(np.exp([u[at] - half, u[at] + half]), rel=2e-3)
+
+
+def test_an_interval_of_two_separate_regions_spans_both() -> None:
+    """A room with two bumps (at 3.16 and 31.6 on a ×1.33 grid, each 0.1 wide in the log, the
+    room negative between them): the interval runs from the first's lower crossing to the
+    second's upper one."""
+    u = np.log(np.geomspace(1.0, 100.0, 17))
+    a, b = u[4], u[12]
+
+    def room_at(v: float) -> float:
+        return CHI2_95 - min((v - a) ** 2, (v - b) ** 2) / 0.01
+
+    lo, hi = effects.crossing_interval(u, np.array([room_at(v) for v in u]), room_at)
+    half = 0.1 * np.sqrt(CHI2_95)
+    assert [lo, hi] == pytest.approx([np.exp(a - half), np.exp(b + half)], rel=2e-3)
+
+
 def _fake(deviance: float) -> SimpleNamespace:
     return SimpleNamespace(deviance=deviance)
 
