@@ -152,6 +152,8 @@ def oscillator_avar(tau: np.ndarray, f0: float, width_hz: float, tau0: float) ->
 
 PREFILTERS = ("moving_average", "bartlett", "first_order")
 """Families of the sensor's prefilter (:func:`prefilter_avar`)."""
+PREFILTER_SUPPORT = {"moving_average": 1.0, "bartlett": 2.0, "first_order": 40.0}
+"""Each prefilter's autocovariance is 0 (first order: below e^−40) beyond this many lengths."""
 
 
 def _prefilter_autocovariance(kind: str, t: np.ndarray, length_s: float) -> np.ndarray:
@@ -190,7 +192,7 @@ def prefilter_avar(tau: np.ndarray, tau0: float, kind: str, length_s: float) -> 
     """
     tau = np.asarray(tau, dtype=float)
     m = np.maximum(np.round(tau / tau0).astype(np.int64), 1)
-    support = {"moving_average": 1.0, "bartlett": 2.0, "first_order": 40.0}[kind] * length_s
+    support = PREFILTER_SUPPORT[kind] * length_s
     lags = np.arange(int(min(np.ceil(support / tau0), 2 * m.max())) + 1)
     r = _prefilter_autocovariance(kind, lags * tau0, length_s)
     r = r / (tau0 * (r[0] + 2 * r[1:].sum()))

@@ -108,6 +108,29 @@ def test_a_shape_is_refined_between_the_grids_points_in_each_family() -> None:
     assert loop._shape_refined("narrowband", one, lambda s: _fake(0.0)) == one
 
 
+def test_no_prefilter_is_searched_that_leaves_the_samples_white() -> None:
+    """A moving average no longer than one sample, or a Bartlett window no longer than half of
+    one, leaves sampled white noise white: its column (the AVAR's deficit under N²/τ) is 0 and
+    its fitted value arbitrary (3.5e5 m/s²/√Hz on a real accel_x).  Each family's grid starts
+    at its first length that correlates neighbouring samples."""
+    tau0 = 0.01
+    ax = SimpleNamespace(tau=np.geomspace(tau0, 100.0, 30), tau_min=tau0,
+                         sig=SimpleNamespace(tau0=tau0))  # fmt: skip
+    specs = loop._grids(ax, SimpleNamespace(effect_parameters={}))["prefilter"]
+    shortest = {f: min(length for g, length, _ in specs if g == f) for f in effects.PREFILTERS}
+    grid = np.geomspace(0.25 * tau0, 20 * tau0, 16)
+    assert shortest == {
+        "moving_average": grid[grid > tau0][0],
+        "bartlett": grid[grid > tau0 / 2][0],
+        "first_order": grid[0],
+    }
+    assert len(specs) == 11 + 13 + 16  # of 3 × 16
+    tau = np.array([0.01, 0.02, 0.04])
+    one_sample = effects.prefilter_avar(tau, tau0, "moving_average", tau0)
+    np.testing.assert_allclose(one_sample, 1 / tau, rtol=1e-12)
+    assert effects.prefilter_avar(tau, tau0, "moving_average", 1.01 * tau0)[0] < 0.99 / tau[0]
+
+
 @pytest.mark.parametrize(
     ("seed", "tau_c", "tau_c_interval", "sigma_interval"),
     [
