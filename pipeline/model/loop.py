@@ -837,7 +837,7 @@ def _column_profile(
     i, name = SHAPE_PARAMETER.get(kind, (0, ""))
     values = np.unique([spec[i] for spec, _ in fits])
     if name and values.size > 1:
-        others = {_with_shape(spec, i, 0.0) for spec, _ in fits}
+        others = dict.fromkeys(_with_shape(spec, i, 0.0) for spec, _ in fits)  # in order
         seen: list[tuple[tuple, ieee952.CompositeFit]] = []
 
         def room_at(u: float) -> float:  # the room at e^u, the most over the other parameters
