@@ -685,6 +685,7 @@ LINE_KINDS = ("sinusoid", "narrowband")  # spectral lines: their harmonics are s
 LINE_SEEDS = (0.005, 0.04, 0.3)  # relative widths of the coarse line search
 LINE_WIDTHS = 14  # line widths profiled at the spectrum's centre
 PROFILE_SHAPES = 12  # shapes whose value intervals make up a profile interval
+SPAN_LO, SPAN_HI = 1 - 1e-9, 1 + 1e-9  # a searched range's ends, read back through exp(log)
 SHAPE_PARAMETER = {"gauss_markov": (0, "tau_c_s"), "narrowband": (1, "width_hz"),
                    "prefilter": (1, "length_s")}  # fmt: skip
 """The continuous shape parameter of each AVAR-column kind searched over a grid (its index in
@@ -837,23 +838,27 @@ def _column_profile(
     i, name = SHAPE_PARAMETER.get(kind, (0, ""))
     values = np.unique([spec[i] for spec, _ in fits])
     if name and values.size > 1:
-        others = dict.fromkeys(_with_shape(spec, i, 0.0) for spec, _ in fits)  # in order
-        seen: list[tuple[tuple, ieee952.CompositeFit]] = []
+        searched_over: dict[tuple, tuple[float, float]] = {}  # each family's values' range
+        for spec, _ in fits:
+            lo, hi = searched_over.get(_with_shape(spec, i, 0.0), (spec[i], spec[i]))
+            searched_over[_with_shape(spec, i, 0.0)] = (min(lo, spec[i]), max(hi, spec[i]))
+        known = dict(fits)
 
-        def room_at(u: float) -> float:  # the room at e^u, the most over the other parameters
-            at = [
-                (spec, fit_at(spec))
-                for spec in (_with_shape(o, i, float(np.exp(u))) for o in others)
-            ]
-            seen.extend(at)
-            return CHI2_95 - (min(f.deviance for _, f in at) - best.deviance) / phi
+        def room_of(v: float) -> float:  # the most over the other parameters searched at v
+            near = [o for o, (lo, hi) in searched_over.items() if lo * SPAN_LO <= v <= hi * SPAN_HI]
+            specs = [_with_shape(o, i, v) for o in near]
+            for spec in specs:
+                if spec not in known:  # a family not searched at v: its fit there, once
+                    known[spec] = fit_at(spec)
+            return CHI2_95 - (min(known[spec].deviance for spec in specs) - best.deviance) / phi
 
-        room = [max(CHI2_95 - (f.deviance - best.deviance) / phi for s, f in fits if s[i] == v)
-                for v in values]  # fmt: skip
-        out[name] = effects.crossing_interval(np.log(values), np.array(room), room_at)
+        room = np.array([room_of(float(v)) for v in values])
+        out[name] = effects.crossing_interval(
+            np.log(values), room, lambda u: room_of(float(np.exp(u)))
+        )
         across = np.geomspace(*out[name], effects.PROFILE_POINTS)
         profile = [_with_shape(best_spec, i, float(v)) for v in across]
-        fits = [*fits, *seen, *((spec, fit_at(spec)) for spec in profile)]
+        fits = [*known.items(), *((spec, fit_at(spec)) for spec in profile)]
     dev = np.array([f.deviance for _, f in fits])
     room = CHI2_95 - (dev - best.deviance) / phi
     bounds = []
