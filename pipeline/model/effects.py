@@ -653,6 +653,21 @@ def _profile_interval(fits: list[SpectralFit]) -> list[float]:
     return [float(np.min(beta - half)), float(np.max(beta + half))]
 
 
+def refined_between(
+    u: np.ndarray, j: int, objective: Callable[[float], float], at_j: float
+) -> float | None:
+    """The log value of least ``objective`` between the neighbours of point ``j`` of a grid of
+    log values ``u`` (ascending): scipy's bounded Brent search, to :data:`XTOL`; ``None`` where
+    the grid has one value or that least is no lower than ``at_j``, the objective at point j."""
+    near = (u[max(j - 1, 0)], u[min(j + 1, len(u) - 1)])
+    if near[0] == near[1]:
+        return None
+    found = optimize.minimize_scalar(
+        objective, bounds=near, method="bounded", options={"xatol": XTOL}
+    )
+    return float(found.x) if found.fun < at_j else None
+
+
 def crossing_interval(
     u: np.ndarray, room: np.ndarray, room_at: Callable[[float], float]
 ) -> list[float]:
@@ -783,18 +798,17 @@ class OptionFamily:
         the family's limit at 0 with its fit (with :attr:`zero` set).
 
         The value minimises the GLS residual sum of squares over :data:`STEPS_PER_DECADE`
-        values a decade from ``lo`` to ``hi``, refined between that grid's neighbours (scipy's
-        bounded Brent search in its logarithm).  Its 95 % interval is where the profile
+        values a decade from ``lo`` to ``hi``, refined between that grid's neighbours
+        (:func:`refined_between`).  Its 95 % interval is where the profile
         deviance (the residual's excess over the best, in its residual variance) crosses
         χ²₁(0.95), found by Brent's root search beside the outermost grid value inside
         (:func:`crossing_interval`).  The coefficient's interval is profiled
         (:func:`_profile_interval`) over the best, the zero limit and :data:`PROFILE_POINTS`
         values across the parameter's interval: the grid's own points are too far apart for a
         strong effect, whose shape is known to a few per cent and its coefficient correlated
-        with it.  Where the zero limit
-        lies within χ²₁(0.95) of the best, the data do not need the parameter: the fit is the
-        zero limit's (its interval from 0), although an option of the family was the most
-        significant."""
+        with it.  Where the zero limit lies within χ²₁(0.95) of the best, the data do not need
+        the parameter: the fit is the zero limit's (its interval from 0), although an option of
+        the family was the most significant."""
         (name,) = option[0]
         decades = np.log10(self.hi / self.lo)
         u = np.log(np.geomspace(self.lo, self.hi, round(decades * STEPS_PER_DECADE) + 2))
@@ -808,11 +822,8 @@ class OptionFamily:
 
         rss = np.array([f.rss for f in fits_at(u)])
         j = int(np.argmin(rss))
-        near = (u[max(j - 1, 0)], u[min(j + 1, len(u) - 1)])
-        found = optimize.minimize_scalar(
-            lambda v: fit_at(v).rss, bounds=near, method="bounded", options={"xatol": XTOL}
-        )
-        best_u = float(found.x if found.fun < rss[j] else u[j])
+        refined = refined_between(u, j, lambda v: fit_at(v).rss, rss[j])
+        best_u = float(u[j]) if refined is None else refined
         best = fit_at(best_u)
 
         def room(v: float) -> float:  # χ²₁(0.95) − the profile deviance at e^v

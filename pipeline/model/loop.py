@@ -56,7 +56,7 @@ from functools import partial
 from typing import Literal, NamedTuple, TypeVar
 
 import numpy as np
-from scipy import optimize, special
+from scipy import special
 
 from imupipe.model import effects, ieee952, spectral_line
 from imupipe.stats.allan import AllanCurve, SparseCorrection, allan_curves, oadev
@@ -772,10 +772,10 @@ def _shape_refined(
     """``fits`` with, for each value of the other shape parameters (a prefilter's family), the
     best's continuous shape parameter (:data:`SHAPE_PARAMETER`: a Gauss–Markov Tc, a
     prefilter's length, a line's width) at the deviance's least between the grid's neighbours
-    of that best (scipy's bounded Brent search in its log, to :data:`effects.XTOL`); none where
-    the grid has one value or its best is no worse.  The grids step by ×1.2–1.4, and a strong
-    effect's Tc is known within a few per cent: on 63 strong Gauss–Markov effects of the
-    independent generator (2 h, 100 Hz), Tc read on the grid was within its interval on 56.
+    of that best (:func:`effects.refined_between`); none where the grid has one value or its
+    best is no worse.  The grids step by ×1.2–1.4, and a strong effect's Tc is known within a
+    few per cent: on 63 strong Gauss–Markov effects of the independent generator (2 h,
+    100 Hz), Tc read on the grid was within its interval on 56.
     Each family is refined: a 4-sample moving average at 100 Hz, between its grid's lengths,
     was a Bartlett window's best grid point."""
     i = SHAPE_PARAMETER[kind][0]
@@ -785,17 +785,14 @@ def _shape_refined(
         spec, fit = _best(own)
         values = np.unique([s[i] for s, _ in own])
         j = int(np.searchsorted(values, spec[i]))
-        near = np.log(values[[max(j - 1, 0), min(j + 1, len(values) - 1)]])
-        if near[0] == near[1]:
-            continue
-        found = optimize.minimize_scalar(
-            lambda u, spec=spec: fit_at(_with_shape(spec, i, float(np.exp(u)))).deviance,
-            bounds=tuple(near),
-            method="bounded",
-            options={"xatol": effects.XTOL},
+        u = effects.refined_between(
+            np.log(values),
+            j,
+            lambda v, spec=spec: fit_at(_with_shape(spec, i, float(np.exp(v)))).deviance,
+            fit.deviance,
         )
-        if found.fun < fit.deviance:
-            best = _with_shape(spec, i, float(np.exp(found.x)))
+        if u is not None:
+            best = _with_shape(spec, i, float(np.exp(u)))
             refined.append((best, fit_at(best)))
     return [*fits, *refined]
 
