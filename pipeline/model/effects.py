@@ -244,6 +244,13 @@ class NoisePsd:
             s = s + var * oscillator_psd(f, centre, width)
         return s
 
+    def sampled(self, f: np.ndarray, tau0: float) -> np.ndarray:
+        """:meth:`at` with the quantisation's rate PSD of samples every ``tau0`` s,
+        (4 Q² / τ0) sin²(π f τ0) (IEEE Std 952-1997, Annex C, quantization noise; (2πf)² τ0 Q²
+        at low f): the spectrum a Welch estimate of the sampled series reads."""
+        f = np.asarray(f, dtype=float)
+        return self.at(f) + 4 * self.quantization / tau0 * np.sin(np.pi * f * tau0) ** 2
+
 
 NUGGET = 1e-9
 """Relative white floor added to the whitened differences' variance γ(0) (:class:`Whitener`)."""
@@ -1360,7 +1367,8 @@ def psd_line(
 
 
 ROLLOFF_BANDS = ((0.05, 0.2), (0.4, 0.5))
-"""Mid and near-Nyquist bands (fractions of the sample rate) of :func:`psd_rolloff`."""
+"""Mid and near-Nyquist bands (fractions of the sample rate) of :func:`psd_rolloff` for a
+filter without a bandwidth or one near Nyquist (:func:`rolloff_bands`)."""
 ROLLOFF_SEGMENT = 256
 
 
@@ -1446,29 +1454,71 @@ def _band_ratio(
     return ratio, float(np.sqrt(variance))
 
 
-def psd_rolloff(y: np.ndarray, tau0: float, welch: Welch | None = None) -> dict[str, float]:
-    """The spectrum's view of a prefilter: the mean Welch PSD (Hann, :data:`ROLLOFF_SEGMENT`
-    samples, 50 % overlap; Welch 1967) of the near-Nyquist band over that of the mid band
-    (:data:`ROLLOFF_BANDS`), over the first :data:`PSD_MAX_SAMPLES` samples at most.
+def rolloff_bands(fs: float, bandwidth_hz: float | None) -> tuple[tuple[float, float], ...]:
+    """(pass band, stop band), Hz, of :func:`psd_rolloff` for a low-pass of −3 dB bandwidth
+    ``bandwidth_hz`` at the sample rate ``fs``: [f₃/8, f₃/2] and [2f₃, min(8f₃, fs/2)), where
+    the filters searched pass ≥ 80 % of the power (a moving average's |H|² = sinc²(fL) at
+    f₃/2: 0.81) and stop ≥ 85 % of it (at 2f₃: a moving average 0.15, a Bartlett window 0.04,
+    a first-order low-pass 0.2 falling as 1/f²).  A filter whose stop band would begin above
+    :data:`ROLLOFF_BANDS`' near-Nyquist band (an anti-alias filter), or no bandwidth: the
+    fixed :data:`ROLLOFF_BANDS`."""
+    (m_lo, m_hi), (h_lo, h_hi) = ROLLOFF_BANDS
+    if bandwidth_hz is None or 2 * bandwidth_hz >= h_lo * fs:
+        return (m_lo * fs, m_hi * fs), (h_lo * fs, h_hi * fs)
+    return (bandwidth_hz / 8, bandwidth_hz / 2), (2 * bandwidth_hz, min(8 * bandwidth_hz, fs / 2))
 
-    White noise gives 1, a rate quantisation or angle white noise more, a low-pass less.  Each
-    band mean averages K segments × b bins of correlated ~χ²₂ periodogram ordinates, so ln(ratio)
-    has standard error √(V_mid + V_high) (:func:`welch_band_variance`: the Hann window's
-    correlation of adjacent bins and of overlapping segments, ~2/(K b) each); ``p_value``:
-    one-sided normal P(no roll-off).
+
+ROLLOFF_PASS_BINS = 16
+"""Least Welch ordinates in :func:`psd_rolloff`'s pass band (its segment is lengthened to it)."""
+
+
+def psd_rolloff(
+    y: np.ndarray,
+    tau0: float,
+    welch: Welch | None = None,
+    bandwidth_hz: float | None = None,
+    model: NoisePsd | None = None,
+) -> dict[str, float]:
+    """The spectrum's view of a prefilter of −3 dB bandwidth ``bandwidth_hz`` (Hz): the mean
+    Welch PSD (Hann, 50 % overlap; Welch 1967) of its stop band over that of its pass band
+    (:func:`rolloff_bands`), over the first :data:`PSD_MAX_SAMPLES` samples at most, divided
+    by the same ratio of the ``model`` PSD without the prefilter (:meth:`NoisePsd.sampled`: the
+    baseline's flicker and random walk raise the pass band, its quantisation the stop band).
+    Segments of :data:`ROLLOFF_SEGMENT` samples, longer where the pass band would hold fewer
+    than :data:`ROLLOFF_PASS_BINS` ordinates (at most an eighth of the samples).
+
+    The model's spectrum gives 1, a low-pass on some of its white noise less (a filter on all
+    of it: the stop band's share left, ~0.04–0.2), an unmodelled rise towards Nyquist (rate
+    quantisation, angle white noise) more.  Each band mean averages K segments × b bins of
+    correlated ~χ²₂ periodogram ordinates, so ln(ratio) has standard error √(V_pass + V_stop)
+    (:func:`welch_band_variance`: the Hann window's correlation of adjacent bins and of
+    overlapping segments, ~2/(K b) each; the model's own uncertainty is not counted);
+    ``p_value``: one-sided normal P(no roll-off).  Measured (session 45): the fixed bands
+    5–20 Hz and 40–50 Hz at 100 Hz, both above a 2 Hz Bartlett filter's bandwidth, read a
+    ratio of 0.99 (p 0.06) where three quarters of the white noise went through it.
     """
     n = min(len(y), PSD_MAX_SAMPLES)
-    seg = min(ROLLOFF_SEGMENT, n)
-    f, pxx = welch(seg) if welch is not None else welch_psd(y, tau0, seg)
     fs = 1.0 / tau0
-    (m_lo, m_hi), (h_lo, h_hi) = ROLLOFF_BANDS
-    mid = (f >= m_lo * fs) & (f <= m_hi * fs)
-    high = (f >= h_lo * fs) & (f < h_hi * fs)
-    ratio, se = _band_ratio(pxx, high, mid, seg, n)
+    (p_lo, p_hi), (s_lo, s_hi) = rolloff_bands(fs, bandwidth_hz)
+    wanted = ROLLOFF_PASS_BINS * fs / (p_hi - p_lo)
+    seg = ROLLOFF_SEGMENT
+    if wanted > seg:
+        seg = int(min(2 ** np.ceil(np.log2(wanted)), max(seg, n // 8)))
+    seg = min(seg, n)
+    f, pxx = welch(seg) if welch is not None else welch_psd(y, tau0, seg)
+    passed = (f >= p_lo) & (f <= p_hi)
+    stopped = (f >= s_lo) & (f < s_hi)
+    ratio, se = _band_ratio(pxx, stopped, passed, seg, n)
+    expected = 1.0
+    if model is not None:
+        stop_level = model.sampled(f[stopped], tau0).mean()
+        expected = float(stop_level / model.sampled(f[passed], tau0).mean())
     return {
-        "high_to_mid": ratio,
-        "p_value": float(special.ndtr(np.log(ratio) / se)),
-        "band_hz": [h_lo * fs, h_hi * fs],
+        "high_to_mid": ratio / expected,
+        "p_value": float(special.ndtr(np.log(ratio / expected) / se)),
+        "band_hz": [s_lo, s_hi],
+        "pass_band_hz": [p_lo, p_hi],
+        "model_high_to_mid": expected,
     }
 
 

@@ -1034,12 +1034,15 @@ def _spectrum_view(ax: _Axis, state: _State, cand: effects.Candidate) -> dict:
     frequency whose sinusoid peaks at the same τ (0.371 / 1.89 Tc ≈ 0.196/Tc, a factor 3 either
     side) must not stand out of its local floor (``competing_line``); a narrowband line must
     stand above its shoulders (:func:`effects.band_excess`); a prefilter must show as a roll-off
-    of the spectrum towards Nyquist (:func:`effects.psd_rolloff`)."""
+    of the spectrum above its bandwidth, against the current model's spectrum
+    (:func:`effects.psd_rolloff`, :func:`noise_psd`)."""
     if cand.kind == "gauss_markov":
         f = 0.196 / cand.params["tau_c_s"]
         return {"competing_line": _local_line(ax, state, f / 3, f * 3)}
     if cand.kind == "prefilter":
-        return {"rolloff": effects.psd_rolloff(ax.sig.y, ax.sig.tau0, ax.welch)}
+        model = noise_psd(state.fit(ax), state.effect_parameters)
+        bandwidth = cand.evidence["bandwidth_3db_hz"]
+        return {"rolloff": effects.psd_rolloff(ax.sig.y, ax.sig.tau0, ax.welch, bandwidth, model)}
     if cand.kind == "narrowband":
         f, w = cand.evidence["shape"]
         return {"band_excess": effects.band_excess(ax.sig.y, ax.sig.tau0, f, w, ax.welch)}
@@ -2213,8 +2216,9 @@ def _decide(t: Trial) -> Decision:
     rolloff = cand.evidence.get("rolloff")
     if rolloff is not None and rolloff["p_value"] >= ALPHA:
         reasons.append(
-            f"no roll-off towards Nyquist in the spectrum (high/mid band level "
-            f"{rolloff['high_to_mid']:.3g}, p {rolloff['p_value']:.2g} >= {ALPHA:g})"
+            f"no roll-off above its bandwidth in the spectrum (stop/pass band level "
+            f"{rolloff['high_to_mid']:.3g} of the model's, p {rolloff['p_value']:.2g} >= "
+            f"{ALPHA:g})"
         )
     if not t.flags_ok:
         reasons.append("flags do not clear")
