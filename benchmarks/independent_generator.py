@@ -51,9 +51,11 @@ EFFECT_KINDS = (
     "outliers",
     "vibration",
     "thermal_lag",
+    "prefilter",
 )
 """Undeclared effects (``thermal_lag``: the temperature coupling through a first-order lag,
-the heat reaching the sensing element after the thermometer).  A supply-voltage coupling is
+the heat reaching the sensing element after the thermometer; ``prefilter``: the sensor's own
+low-pass filter on the axis' output).  A supply-voltage coupling is
 not generated: a sensor_msgs/Imu bag carries no supply channel (nothing could be coupled to
 it)."""
 OVERSAMPLE = 8
@@ -198,7 +200,8 @@ def add_effect(
     ``size`` × the axis' noise ADEV at the effect's characteristic τ (sinusoid 0.371/f, its
     ADEV peak; Gauss-Markov 1.89 Tc; step/event: their duration or T/10; ramp and warm-up:
     T/4 and the warm-up time; temperature and its thermal lag: half its cycle); outliers:
-    ``size`` × 10 × the white-noise sigma of one sample.  Returns the effect's description
+    ``size`` × 10 × the white-noise sigma of one sample; the sensor's prefilter: its −3 dB
+    bandwidth 0.2 / ``size`` of the sample rate.  Returns the effect's description
     (SI units)."""
     n = len(y)
     t = np.arange(n) * tau0
@@ -299,6 +302,28 @@ def add_effect(
         out |= {"axis": "accel_x" if abs(np.cos(phi)) >= abs(np.sin(phi)) else "accel_y",
                 "axes": ["accel_x", "accel_y"], "time_s": at, "duration_s": length,
                 "theta_rad": theta, "azimuth_rad": phi}  # fmt: skip
+    elif kind == "prefilter":
+        # the sensor's digital low-pass on everything the axis outputs (before the LSB
+        # rounding): a moving average, a Bartlett window (two moving averages) or a first-order
+        # low-pass whose -3 dB bandwidth is 0.2 / size of the sample rate
+        family = str(rng.choice(["moving_average", "bartlett", "first_order"]))
+        fc = 0.2 / (size * tau0)
+        if family == "first_order":
+            pole = np.exp(-2 * np.pi * fc * tau0)
+            num, den = np.array([1 - pole]), np.array([1.0, -pole])
+            length_s = tau0 / (1 - pole)  # the time constant of its impulse response's sum
+        else:
+            taps = max(2, round((0.443 if family == "moving_average" else 0.3195) / (fc * tau0)))
+            num = np.ones(taps) / taps
+            if family == "bartlett":
+                num = np.convolve(num, num)
+            den = np.array([1.0])
+            length_s = taps * tau0
+        state = signal.lfilter_zi(num, den) * y[0, a]  # started at rest on the first sample
+        y[:, a] = signal.lfilter(num, den, y[:, a], zi=state)[0]
+        f, h = signal.freqz(num, den, worN=1 << 16, fs=1 / tau0)
+        bandwidth = float(f[np.argmax(np.abs(h) ** 2 < 0.5)])
+        out |= {"filter": family, "length_s": length_s, "bandwidth_3db_hz": bandwidth}
     elif kind == "outliers":
         count = int(rng.integers(30, 200))
         where = rng.choice(n, count, replace=False)

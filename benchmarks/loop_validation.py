@@ -9,7 +9,8 @@ scored against the generator's truth:
   resolved, on the effect's axis (an event: on one of its axes);
 * right kind: an accepted effect of the expected kind (:data:`EXPECTED`) on the effect's axis;
 * false: an accepted effect or excised outliers on an axis without an effect (clean recordings:
-  on any axis; a resolved R term is listed under "found as" but not counted);
+  on any axis; a resolved R term or a negative 1/τ² term — :data:`FIT_TERMS` — is listed
+  under "found as" but not counted);
 * error before/after: the Allan-space error (gamma deviance / dof, ``report.json`` model
   ``error_before``/``error_after``) on the effect's axis, and the time-domain error (whitened
   residual, ``time_domain_error_before``/``after``) beside it;
@@ -61,19 +62,26 @@ EXPECTED = {
     "event": {"event"},  # a disturbance event found jointly on the axes (report.json events)
     "tilt": {"event"},
     "outliers": {"outliers", "spike"},
+    "prefilter": {"prefilter", "prefilter term"},
 }
 """Loop kinds that count as the right answer for each generated effect."""
+FIT_TERMS = {"R term", "prefilter term"}
+"""What the IEEE 952 fit itself resolves: listed under "found as", never a false effect."""
 
 
 def _found(axis: dict, name: str, events: list[dict]) -> list[str]:
     """Accepted effects, "event" for each disturbance event touching the axis (report.json
     ``events.found``), "outliers" if any were excised, "R term" if the IEEE 952 rate ramp is
-    resolved after the loop (a linear drift is that term)."""
+    resolved after the loop (a linear drift is that term), "prefilter term" if the final fit's
+    1/τ² term is negative (``ieee952_fit.prefilter_avar_s2``: a low-pass's correlation of
+    neighbouring samples, which the fit models without a prefilter effect)."""
     kinds = [e["kind"] for e in axis.get("effects", [])]
     kinds += ["event" for e in events if name in e["axes"]]
     terms = axis.get("ieee952_after") or axis["ieee952"]
     resolved_r = terms.get("rate_ramp", {}).get("value") is not None
-    return kinds + (["outliers"] if axis.get("outliers") else []) + (["R term"] * resolved_r)
+    kinds += ["outliers"] if axis.get("outliers") else []
+    kinds += ["prefilter term"] if axis["ieee952_fit"]["prefilter_avar_s2"] > 0 else []
+    return kinds + (["R term"] * resolved_r)
 
 
 def _terms(axis: dict) -> tuple[dict, dict]:
@@ -167,7 +175,7 @@ def run_one(job: dict) -> dict:
     found = {a: _found(ax, a, events) for a, ax in result["axes"].items()}
     row: dict = {**job, "truth": truth.as_json(), "found": found, "matched_power": power}
     row["false_axes"] = sorted(
-        a for a, k in found.items() if set(k) - {"R term"} and a not in effect_axes
+        a for a, k in found.items() if set(k) - FIT_TERMS and a not in effect_axes
     )
     if effect:
         on_axis = [k for a in effect_axes for k in found.get(a, [])]

@@ -100,6 +100,34 @@ def test_a_moving_average_prefilter_below_the_fit_start_is_its_length():
     assert n.lo < SIGMA * np.sqrt(TAU0) < n.hi
 
 
+def test_a_prefilter_on_part_of_the_white_noise_is_found_by_the_roll_off_at_its_bandwidth():
+    """White noise of 3σ through a Bartlett window of 16 + 16 samples (−3 dB at 2 Hz) beside
+    unfiltered white noise of σ (the sensor's filter on part of the noise): until session 45
+    the spectrum's view compared 5–20 Hz with 40–50 Hz, both above 2 Hz, read 0.99 and refused
+    it, and the fit started at 0.16 s.  Read at 0.25–1 Hz against 4–16 Hz and against the
+    model's spectrum: 0.11, a Bartlett of 0.161 s [0.157, 0.166], its filtered white noise's
+    interval holding 3σ√τ0, the fit from τ0, N (the whole white noise's, √10 σ√τ0) within
+    0.7 % and inside its interval.  Seeds 1–3 give the same (lengths 0.158–0.161 s)."""
+    rng = np.random.default_rng(0)
+    k = np.convolve(np.ones(16), np.ones(16))
+    filtered = signal.lfilter(k / k.sum(), [1.0], 3 * rng.standard_normal(N))
+    res = run(SIGMA * (filtered + rng.standard_normal(N)))
+    assert res.terms_before.fit_tau_min_s == 0.16
+    (found,) = res.accepted
+    assert found.kind == "prefilter" and found.params["filter"] == "bartlett"
+    assert found.params["length_s"] == pytest.approx(0.1613, rel=0.002)
+    lo, hi = found.intervals["length_s"]
+    assert 0.155 < lo < 0.16 < hi < 0.167
+    lo, hi = found.intervals["white_filtered"]
+    assert lo < 3 * SIGMA * np.sqrt(TAU0) < hi < 1.03 * 3 * SIGMA * np.sqrt(TAU0)
+    roll = found.evidence["rolloff"]
+    assert roll["high_to_mid"] == pytest.approx(0.110, abs=0.003)
+    assert roll["band_hz"] == pytest.approx([3.962, 15.848], rel=1e-3)
+    assert res.terms_after.fit_tau_min_s == 0.01 and res.after.p_value > 0.5
+    n, truth = res.terms_after.random_walk, np.sqrt(10) * SIGMA * np.sqrt(TAU0)
+    assert n.value == pytest.approx(truth, rel=0.007) and n.lo < truth < n.hi
+
+
 def test_an_effect_that_leaves_the_range_as_it_was_gives_no_second_error_before():
     """A 0.5 Hz sinusoid is modelled inside the baseline's range: the error before is on the
     final range already, and ``error_before_final_range`` stays null."""

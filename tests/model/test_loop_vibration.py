@@ -797,3 +797,54 @@ def test_two_lines_that_widen_the_range_only_together_are_found_together(paper_g
     assert "the 31 Hz and 7 Hz narrowband lines below" in looped.terms_after.fit_note
     assert looped.terms_after.random_walk.value == pytest.approx(paper_gyro.n, rel=0.01)
     assert looped.after.p_value > 0.5
+
+
+def test_a_prefilters_roll_off_is_read_around_its_own_bandwidth():
+    """Pass band [f₃/8, f₃/2], stop band [2f₃, min(8f₃, fs/2)); a filter whose stop band would
+    begin above 0.4 fs (an anti-alias filter) or no bandwidth: the fixed 5–20 / 40–50 Hz."""
+    assert effects.rolloff_bands(100.0, 2.0) == ((0.25, 1.0), (4.0, 16.0))
+    assert effects.rolloff_bands(100.0, 8.0) == ((1.0, 4.0), (16.0, 50.0))
+    assert effects.rolloff_bands(100.0, 19.9) == ((19.9 / 8, 9.95), (39.8, 50.0))
+    fixed = ((5.0, 20.0), (40.0, 50.0))
+    assert effects.rolloff_bands(100.0, 20.0) == effects.rolloff_bands(100.0, None) == fixed
+
+
+def test_a_roll_off_on_part_of_the_white_noise_shows_around_its_bandwidth():
+    """Three quarters of the white noise through a 2 Hz Bartlett window (16 + 16 samples at
+    100 Hz): the fixed bands, both above 2 Hz, read no roll-off (ratio 0.99); the bands around
+    2 Hz read the stop band at 0.11 of the pass band (the unfiltered quarter and the filter's
+    sidelobes), segments lengthened to 4096 samples so that the 0.25–1 Hz pass band holds 31
+    ordinates."""
+    rng = np.random.default_rng(0)
+    k = np.convolve(np.ones(16), np.ones(16)) / 256
+    y = signal.lfilter(k, [1.0], 3 * rng.standard_normal(2**19)) + rng.standard_normal(2**19)
+    assert effects.psd_rolloff(y, 0.01)["p_value"] > 0.01
+    asked: list[int] = []
+    roll = effects.psd_rolloff(y, 0.01, lambda seg: asked.append(seg) or effects.welch_psd(
+        y, 0.01, seg), 2.0)  # fmt: skip
+    assert asked == [4096]
+    assert roll["band_hz"] == [4.0, 16.0] and roll["pass_band_hz"] == [0.25, 1.0]
+    assert roll["high_to_mid"] == pytest.approx(0.110, abs=0.005)
+    assert roll["p_value"] < 1e-100 and roll["model_high_to_mid"] == 1.0
+
+
+def test_the_roll_off_is_read_against_the_models_spectrum():
+    """Strong flicker beside white noise, no filter: the pass band 0.25–1 Hz lies on the
+    flicker, so the raw band ratio reads a roll-off that is the flicker's 1/f (p < 1e-3);
+    against the model's spectrum (its flicker and white) the ratio is 1 within its noise.
+    Quantisation raises the model's stop band by (4Q²/τ0) sin²(πfτ0)."""
+    n, tau0, white, flicker = 2**19, 0.01, 1e-3, 3e-2  # N (u/√Hz) and B (u)
+    rng = np.random.default_rng(3)
+    y = gen.white_rate(n, tau0, white, rng) + gen.flicker_rate(n, tau0, flicker, rng)
+    raw = effects.psd_rolloff(y, tau0, None, 2.0)
+    assert raw["high_to_mid"] < 0.1 and raw["p_value"] < 1e-100
+    model = effects.NoisePsd(white**2, flicker**2, np.inf, 0.0)
+    read = effects.psd_rolloff(y, tau0, None, 2.0, model)
+    assert read["high_to_mid"] == pytest.approx(1.0, abs=0.03) and read["p_value"] > 0.05
+    assert read["model_high_to_mid"] == pytest.approx(raw["high_to_mid"], rel=0.03)
+    q = effects.NoisePsd(1.0, 0.0, np.inf, 0.0, quantization=2e-4)
+    f = np.array([1.0, 25.0, 50.0])
+    quantised = 4 * 2e-4 / tau0 * np.sin(np.pi * f * tau0) ** 2
+    np.testing.assert_allclose(q.sampled(f, tau0) - 1.0, quantised, rtol=1e-9)
+    low = q.sampled(np.array([1.0]), tau0)[0] - 1  # (2πf)² τ0 Q² at low f
+    assert low == pytest.approx((2 * np.pi) ** 2 * tau0 * 2e-4, rel=1e-3)
