@@ -137,11 +137,15 @@ def line_centre(
     (bounded, within a factor :data:`WIDTH_SPAN` of the estimate) at each centre, each edge found
     by bracketing and Brent's root finder.  ``None`` when the band holds fewer than 8 ordinates,
     an ordinate of exactly 0 (a constant stretch of a series: its Whittle deviance is
-    infinite), or no width minimum (the deviance still falls :data:`MAX_REFITS` restarts
-    wider: a smooth spectrum, no line).
+    infinite), no width minimum (the deviance still falls :data:`MAX_REFITS` restarts
+    wider: a smooth spectrum, no line), or a centre outside ``freqs`` (a low-pass's smooth fall
+    is an oscillator's spectrum centred at 0 Hz, as wide as the filter's bandwidth: measured,
+    a first-order low-pass of 13.5 Hz at 200 Hz gave a centre of −5.5e-5 Hz for a band of
+    4.3–11 Hz, and the line's width grid, up to half its centre, crashed the analysis).
     """
     if power.size < 8 or not np.all(power > 0):
         return None
+    band = (freqs[0], freqs[-1])
     coarse = [
         (c, w)
         for w in widths
@@ -187,6 +191,8 @@ def line_centre(
         x0 = start.x + np.array([0.0, at_centre.x])  # Nelder–Mead stopped short of the width
     else:
         return None  # the deviance still falls at ever wider widths: no line to centre
+    if not band[0] <= c_hat <= band[1]:
+        return None  # the Whittle fit's centre ran out of the band: no line in it
 
     def profile(c: float) -> float:  # min over the width of the deviance at centre c
         res = at_centre if c == c_hat else best_width(c, w_hat)

@@ -155,17 +155,21 @@ def test_the_welch_window_is_scipys_hann_and_the_spectrum_views_leave_scipy_sign
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
-@pytest.mark.parametrize("view", ["rolloff", "band_excess"])
+@pytest.mark.parametrize("view", ["rolloff", "rolloff at 2 Hz", "band_excess"])
 def test_the_spectrum_views_p_values_are_calibrated_on_white_noise(view):
     """On white noise the band ratio's z (ln ratio / its standard error) has unit spread, so
     p < 0.05 on 5 % of series: with 1/(K b), the correlated ordinates' variance ignored, the
     spread was 1.47 and p < 1e-3 came ~17x too often.  500 series: the spread within 1 ± 0.1
-    (its standard error is ~3 %)."""
+    (its standard error is ~3 %); the roll-off of a 2 Hz filter too (its bands 0.25–1 Hz and
+    4–16 Hz, 4096-sample segments), read against the white model's spectrum."""
     z = []
+    white = effects.NoisePsd(1.0, 0.0, np.inf, 0.0)
     for seed in range(500):
-        y = np.random.default_rng(seed).standard_normal(2**14 if view == "rolloff" else 2**16)
+        y = np.random.default_rng(seed).standard_normal(2**16 if view != "rolloff" else 2**14)
         if view == "rolloff":
             p = effects.psd_rolloff(y, 0.01)["p_value"]
+        elif view == "rolloff at 2 Hz":
+            p = effects.psd_rolloff(y, 0.01, None, 2.0, white)["p_value"]
         else:
             p = effects.band_excess(y, 0.01, 3.0, 0.05)["p_value"]
         z.append(-special.ndtri(p))
