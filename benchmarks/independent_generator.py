@@ -311,7 +311,7 @@ def add_effect(
         if family == "first_order":
             pole = np.exp(-2 * np.pi * fc * tau0)
             num, den = np.array([1 - pole]), np.array([1.0, -pole])
-            length_s = tau0 / (1 - pole)  # the time constant of its impulse response's sum
+            length_s = -tau0 / np.log(pole)  # its time constant, 1 / (2π fc)
         else:
             taps = max(2, round((0.443 if family == "moving_average" else 0.3195) / (fc * tau0)))
             num = np.ones(taps) / taps

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import functools
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
 from functools import partial
 from typing import TYPE_CHECKING, Literal
@@ -1011,6 +1011,41 @@ def _adequacy(fit: CompositeFit, level: float = ADEQUATE_P) -> str | None:
     )
 
 
+def over_alternatives(
+    fit: CompositeFit,
+    alternatives: Sequence[CompositeFit],
+    avar: np.ndarray,
+    edf: np.ndarray,
+    j: int,
+    correlation: np.ndarray | None,
+    interval: tuple[float, float],
+) -> tuple[float, float]:
+    """The 95 % profile interval ``interval`` of ``fit``'s coefficient ``j`` widened over
+    ``alternatives`` (fits of the same points with a non-linear shape elsewhere): the profile
+    deviance of the coefficient is the least over the shape, so its interval is the union over
+    the alternatives within ΔD = D − D_min ≤ φ c_j χ²₁(0.95) of each one's interval at the
+    remaining room (φ the dispersion and c_j the :meth:`CompositeFit.sandwich_factor` of
+    ``fit``; the same construction as the effects' own values, ``loop._column_profile``).  An
+    alternative on which the coefficient is not resolved widens only the upper end: the term
+    stays reported as resolved, its lower end the least resolved one."""
+    lo, hi = interval
+
+    def scale(f: CompositeFit) -> float:
+        adjust = 1.0 if correlation is None else f.sandwich_factor(edf, correlation, j)
+        return f.dispersion * adjust
+
+    phi = scale(fit)
+    for alt in alternatives:
+        room = chi2_ppf_1dof(0.95) - (alt.deviance - fit.deviance) / phi
+        if room <= 0:
+            continue
+        level = float(special.gammainc(0.5, room * phi / scale(alt) / 2))  # χ²₁'s cdf
+        a_lo, a_hi = alt.profile_interval(avar, edf, j, max(level, 1e-9), correlation)
+        lo = min(lo, a_lo) if a_lo > 0 else lo
+        hi = max(hi, a_hi)
+    return lo, hi
+
+
 def terms_from_fit(
     fit: CompositeFit,
     avar: np.ndarray,
@@ -1020,6 +1055,7 @@ def terms_from_fit(
     avar_hi: np.ndarray | None = None,
     effect_parameters: dict[str, tuple[str, tuple]] | None = None,
     sampling: tuple[float, np.ndarray] | None = None,
+    alternatives: Sequence[CompositeFit] = (),
 ) -> NoiseTerms:
     """Convert the squared coefficients of ``fit`` to IEEE 952 terms with profile intervals.
 
@@ -1034,7 +1070,9 @@ def terms_from_fit(
     :data:`CORRELATED_TERMS` and of the effects then account for the correlation of the fitted
     τ points (:func:`fit_correlation`, :meth:`CompositeFit.sandwich_factor`); without it, and
     for K and R always, the points are counted as independent (K, R: with their evidence
-    weights).
+    weights).  ``alternatives``: fits of the same curve with an effect's shape elsewhere in its
+    interval; a resolved term's interval is then its profile over them too
+    (:func:`over_alternatives`).
     """
     rho = None if sampling is None else fit_correlation(fit, *sampling)
     tau_lo, tau_hi = fit.tau_range
@@ -1052,6 +1090,10 @@ def terms_from_fit(
         lo, hi_profile = profiled.profile_interval(avar, edf, j, correlation=correlated)
         if profiled is not fit:  # R held at 0 in the model is reported by its bound
             lo = 0.0
+        elif lo > 0:
+            lo, hi_profile = over_alternatives(
+                fit, alternatives, avar, edf, j, correlated, (lo, hi_profile)
+            )
         capped = caps[j] < hi_profile
         hi = min(hi_profile, caps[j])  # an unresolved term: at most what the curve allows
         if j == 0 and fit.short_sign < 0:

@@ -312,6 +312,9 @@ class _State:
     effect_parameters: dict[str, tuple[str, tuple]] = field(default_factory=dict)
     # 95 % interval (Hz) of each modelled line's frequency (sinusoid, narrowband), by column
     frequency_intervals: dict[str, list[float]] = field(default_factory=dict)
+    # (index in its shape, 95 % interval) of each column's continuous shape parameter
+    # (:data:`SHAPE_PARAMETER`: a Gauss–Markov's Tc, a line's width, a prefilter's length)
+    shape_intervals: dict[str, tuple[int, list[float]]] = field(default_factory=dict)
 
     @property
     def line_frequencies(self) -> list[float]:
@@ -334,7 +337,21 @@ class _State:
             self.n_nonlinear + cand.n_params - 1,
             effect_parameters=self.effect_parameters | {name: (kind, cand.evidence["shape"])},
             frequency_intervals=self.frequency_intervals | ({name: interval} if interval else {}),
+            shape_intervals=self.shape_intervals,
         )
+
+    def with_shape_intervals(self, accepted: list[effects.Candidate]) -> _State:
+        """This state with the 95 % intervals of the ``accepted`` candidates' continuous shape
+        parameters (:data:`SHAPE_PARAMETER`; their profiles run after :meth:`with_column`)
+        recorded for their columns, found by kind and shape."""
+        shaped = dict(self.shape_intervals)
+        for cand in accepted:
+            i, shape_name = SHAPE_PARAMETER.get(cand.kind, (0, ""))
+            if shape_name in cand.intervals:
+                for name, parameters in self.effect_parameters.items():
+                    if parameters == (cand.kind, cand.evidence["shape"]):
+                        shaped[name] = (i, cand.intervals[shape_name])
+        return replace(self, shape_intervals=shaped)
 
     def fit(
         self, ax: _Axis, possible_b: bool = False, rate_ramp: bool = True
@@ -357,13 +374,18 @@ class _State:
             rate_ramp,
         )
 
-    def terms(self, ax: _Axis) -> ieee952.NoiseTerms:
-        """The model of this state as reported: the IEEE 952 terms of its fit with B possible
-        (bounds capped by this state's curve), R released only where the data ask for it
-        (:func:`ieee952.release_rate_ramp`), and the accepted AVAR effects."""
+    def reported_fit(self, ax: _Axis) -> ieee952.CompositeFit:
+        """The fit as reported: B possible, R released only where the data ask for it
+        (:func:`ieee952.release_rate_ramp`)."""
         free, held = (self.fit(ax, True, rate_ramp) for rate_ramp in (True, False))
+        return ieee952.release_rate_ramp(free, held)
+
+    def terms(self, ax: _Axis) -> ieee952.NoiseTerms:
+        """The model of this state as reported: the IEEE 952 terms of its :meth:`reported_fit`
+        (bounds capped by this state's curve) and the accepted AVAR effects; the noise terms'
+        intervals over the effects' shapes too (:meth:`shape_alternatives`)."""
         return ieee952.terms_from_fit(
-            ieee952.release_rate_ramp(free, held),
+            self.reported_fit(ax),
             self.avar,
             ax.edf,
             ax.sig.sensor,
@@ -371,7 +393,24 @@ class _State:
             ax.avar_hi(self.avar),
             {k: self.effect_parameters[k] for k in self.columns},
             (ax.sig.tau0, ax.n_terms),
+            self.shape_alternatives(ax),
         )
+
+    def shape_alternatives(self, ax: _Axis) -> list[ieee952.CompositeFit]:
+        """The reported fits with one modelled effect's continuous shape parameter at
+        :data:`effects.PROFILE_POINTS` values across its 95 % interval (the others at their
+        estimates): a noise term correlated with that shape (N with a prefilter's length, B
+        with a Gauss–Markov's Tc) varies over them, which its interval at the estimated shape
+        leaves out.  Measured (session 45): a 40-sample moving average at 100 Hz, its length
+        0.402 s [0.392, 0.413], N 1.008× the truth with an interval of [1.0016, 1.016]×."""
+        fits = []
+        for name, (i, (lo, hi)) in self.shape_intervals.items():
+            kind, spec = self.effect_parameters[name]
+            for v in np.geomspace(lo, hi, effects.PROFILE_POINTS):
+                other = _with_shape(spec, i, float(v))
+                column = _shape(kind, ax.sig.tau0)(ax.tau, other)
+                fits.append(replace(self, columns=self.columns | {name: column}).reported_fit(ax))
+        return fits
 
 
 def _fit(
@@ -684,6 +723,12 @@ the real ADIS16405 imu2 accel_x 10 Hz line (a narrow tone on a broad hump), whos
 LINE_KINDS = ("sinusoid", "narrowband")  # spectral lines: their harmonics are searched
 LINE_SEEDS = (0.005, 0.04, 0.3)  # relative widths of the coarse line search
 LINE_WIDTHS = 14  # line widths profiled at the spectrum's centre
+PREFILTER_MAX_SAMPLES = 128
+"""Longest prefilter searched, in samples: a sensor's low-pass of 1–5 Hz at 200–1000 Hz is
+30–160 samples long (the ADIS16364's Bartlett of 128 taps at 819.2 Hz, 0.16 s, is 32 samples of
+its 200 Hz output).  Until session 45 the grid stopped at 20 samples: a 22-sample moving
+average at 200 Hz (the independent generator's) was fitted at the grid's end, 0.10 s, and
+refused by its hold-out."""
 PROFILE_SHAPES = 12  # shapes whose value intervals make up a profile interval
 SPAN_LO, SPAN_HI = 1 - 1e-9, 1 + 1e-9  # a searched range's ends, read back through exp(log)
 SHAPE_PARAMETER = {"gauss_markov": (0, "tau_c_s"), "narrowband": (1, "width_hz"),
@@ -891,7 +936,8 @@ def _grids(ax: _Axis, state: _State) -> dict[str, list[tuple]]:
     second of those frequencies away from the lines already modelled × :data:`LINE_SEEDS`
     relative widths (a coarse search, refined on the spectrum and in width by
     :func:`_narrowband_refine`); prefilters of each
-    family (:data:`effects.PREFILTERS`) from a quarter sample to 20 samples long whose
+    family (:data:`effects.PREFILTERS`) from a quarter sample to :data:`PREFILTER_MAX_SAMPLES`
+    long (24 lengths, steps of ×1.31) whose
     autocovariance reaches beyond one sample: a shorter one leaves the samples white, its
     column 0 and its value arbitrary (a quarter-sample moving average was the best of a
     rejected search below the fit start of a real ADIS16405 accel_x, at 3.5e5 m/s²/√Hz)."""
@@ -909,7 +955,7 @@ def _grids(ax: _Axis, state: _State) -> dict[str, list[tuple]]:
         "prefilter": [
             (family, float(length), tau0)
             for family in effects.PREFILTERS
-            for length in np.geomspace(0.25 * tau0, 20 * tau0, 16)
+            for length in np.geomspace(0.25 * tau0, PREFILTER_MAX_SAMPLES * tau0, 24)
             if effects.PREFILTER_SUPPORT[family] * length > tau0
         ],
     }
@@ -1091,7 +1137,9 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
             ax.fit_note = f"{note} (with {_short_terms(terms)} below the baseline's fit start "
             ax.fit_note += "modelled)"
             good = goodness(state.fit(ax), tau, state.avar, edf)  # error before, same τ
-        state = chosen.trial.state
+        state = chosen.trial.state.with_shape_intervals(
+            [c for c in (chosen.trial.cand, chosen.trial.joint) if c is not None]
+        )
         new_fit = state.fit(ax)
         new_good = goodness(new_fit, tau, state.avar, edf)
         accepted.extend(chosen.accepted(good.error, new_good.error))
@@ -2046,6 +2094,7 @@ def _corrected_state(ax: _Axis, state: _State, cand: effects.Candidate) -> _Stat
         state.n_nonlinear,
         effect_parameters=state.effect_parameters,
         frequency_intervals=state.frequency_intervals,
+        shape_intervals=state.shape_intervals,
     )
 
 

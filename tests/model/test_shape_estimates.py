@@ -118,13 +118,14 @@ def test_no_prefilter_is_searched_that_leaves_the_samples_white() -> None:
                          sig=SimpleNamespace(tau0=tau0))  # fmt: skip
     specs = loop._grids(ax, SimpleNamespace(effect_parameters={}))["prefilter"]
     shortest = {f: min(length for g, length, _ in specs if g == f) for f in effects.PREFILTERS}
-    grid = np.geomspace(0.25 * tau0, 20 * tau0, 16)
+    grid = np.geomspace(0.25 * tau0, 128 * tau0, 24)
     assert shortest == {
         "moving_average": grid[grid > tau0][0],
         "bartlett": grid[grid > tau0 / 2][0],
         "first_order": grid[0],
     }
-    assert len(specs) == 11 + 13 + 16  # of 3 × 16
+    assert max(length for _, length, _ in specs) == pytest.approx(1.28, rel=1e-12)
+    assert len(specs) == 18 + 21 + 24  # of 3 × 24
     tau = np.array([0.01, 0.02, 0.04])
     one_sample = effects.prefilter_avar(tau, tau0, "moving_average", tau0)
     np.testing.assert_allclose(one_sample, 1 / tau, rtol=1e-12)
