@@ -411,3 +411,30 @@ def test_profile_end_refitted_from_its_own_solution_lies_within_the_limit() -> N
     lo, hi = fit.profile_interval(case["avar"], case["edf"], j, float(case["level"]))
     assert lo / fit.coef[j] == pytest.approx(0.36328, rel=1e-3)
     assert hi / fit.coef[j] == pytest.approx(2.14359, rel=1e-3)
+
+
+def test_a_terms_interval_over_alternative_shapes_is_the_union_within_the_room() -> None:
+    """``over_alternatives``: a Gauss–Markov column at Tc 2 s fitted beside white noise and
+    flicker.  The same fit with Tc 1.9 s (ΔD 0.34) widens B's upper end from 2.2785e-4 to
+    2.2991e-4, with Tc 2.1 s (ΔD 0.68) its lower end from 1.6526e-4 to 1.6218e-4; Tc 2.6 s
+    (ΔD 15.8, beyond χ²₁(0.95) φ) leaves the interval as it was, as no alternative does."""
+    tau = 0.01 * 2.0 ** np.arange(18)
+    rng = np.random.default_rng(2)
+    edf = np.maximum(2.6e6 / (tau / 0.01), 3.0)
+    gm = lambda tc: ieee952.effect_shape("gauss_markov", (tc,), 0.01)(tau)  # noqa: E731
+    truth = ieee952.avar_model(tau, random_walk=1e-3, bias_instability=2e-4) + 3e-7 * gm(2.0)
+    avar = truth * rng.chisquare(edf) / edf
+    fits = {tc: ieee952.fit_composite(tau, avar, edf, {"gm": gm(tc)}, np.inf)
+            for tc in (2.0, 1.9, 2.1, 2.6)}  # fmt: skip
+    best, j = fits[2.0], 2  # B
+    interval = best.profile_interval(avar, edf, j)
+    assert np.sqrt(interval) == pytest.approx([1.6526e-4, 2.2785e-4], rel=1e-4)
+
+    def over(*alternatives: float) -> np.ndarray:
+        alts = [fits[tc] for tc in alternatives]
+        return np.sqrt(ieee952.over_alternatives(best, alts, avar, edf, j, None, interval))
+
+    assert over().tolist() == over(2.6).tolist() == np.sqrt(interval).tolist()
+    assert over(1.9) == pytest.approx([1.6526e-4, 2.2991e-4], rel=1e-4)
+    assert over(2.1) == pytest.approx([1.6218e-4, 2.2785e-4], rel=1e-4)
+    assert over(1.9, 2.1, 2.6) == pytest.approx([1.6218e-4, 2.2991e-4], rel=1e-4)

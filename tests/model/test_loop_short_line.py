@@ -128,6 +128,27 @@ def test_a_prefilter_on_part_of_the_white_noise_is_found_by_the_roll_off_at_its_
     assert n.value == pytest.approx(truth, rel=0.007) and n.lo < truth < n.hi
 
 
+def test_a_40_sample_moving_average_is_found_and_n_is_profiled_over_its_length():
+    """A 40-sample moving average at 100 Hz: beyond the 20-sample grid of sessions 44 (a
+    22-sample one at 200 Hz was fitted at the grid's end and refused).  Found at 0.402 s
+    [0.392, 0.413], the fit from τ0.  N and the length are correlated: at the estimated length
+    N's interval was [1.0016, 1.016]× the truth (N 1.008×); over the length's interval it is
+    [0.9853, 1.0328]×, holding it."""
+    rng = np.random.default_rng(0)
+    y = SIGMA * signal.lfilter(np.ones(40) / 40, [1.0], rng.standard_normal(N))
+    res = run(y)
+    (found,) = res.accepted
+    assert found.params["filter"] == "moving_average"
+    assert found.params["length_s"] == pytest.approx(0.4022, rel=1e-3)
+    lo, hi = found.intervals["length_s"]
+    assert lo == pytest.approx(0.3916, rel=1e-3) and hi == pytest.approx(0.4132, rel=1e-3)
+    assert res.terms_after.fit_tau_min_s == 0.01
+    n, truth = res.terms_after.random_walk, SIGMA * np.sqrt(TAU0)
+    assert n.value / truth == pytest.approx(1.0083, abs=1e-4)
+    assert n.lo / truth == pytest.approx(0.9853, abs=1e-3)
+    assert n.hi / truth == pytest.approx(1.0328, abs=1e-3)
+
+
 def test_an_effect_that_leaves_the_range_as_it_was_gives_no_second_error_before():
     """A 0.5 Hz sinusoid is modelled inside the baseline's range: the error before is on the
     final range already, and ``error_before_final_range`` stays null."""
