@@ -73,14 +73,15 @@ def _found(axis: dict, name: str, events: list[dict]) -> list[str]:
     """Accepted effects, "event" for each disturbance event touching the axis (report.json
     ``events.found``), "outliers" if any were excised, "R term" if the IEEE 952 rate ramp is
     resolved after the loop (a linear drift is that term), "prefilter term" if the final fit's
-    1/τ² term is negative (``ieee952_fit.prefilter_avar_s2``: a low-pass's correlation of
-    neighbouring samples, which the fit models without a prefilter effect)."""
+    1/τ² term is negative and resolved (Q "masked": a low-pass's correlation of neighbouring
+    samples, which the fit models without a prefilter effect)."""
     kinds = [e["kind"] for e in axis.get("effects", [])]
     kinds += ["event" for e in events if name in e["axes"]]
     terms = axis.get("ieee952_after") or axis["ieee952"]
     resolved_r = terms.get("rate_ramp", {}).get("value") is not None
     kinds += ["outliers"] if axis.get("outliers") else []
-    kinds += ["prefilter term"] if axis["ieee952_fit"]["prefilter_avar_s2"] > 0 else []
+    masked = (terms["quantization"].get("reason") or "").startswith("masked")
+    kinds += ["prefilter term"] if masked else []
     return kinds + (["R term"] * resolved_r)
 
 
@@ -179,7 +180,7 @@ def run_one(job: dict) -> dict:
     )
     if effect:
         on_axis = [k for a in effect_axes for k in found.get(a, [])]
-        row["detected"] = bool(on_axis)
+        row["detected"] = bool(set(on_axis) - (FIT_TERMS - EXPECTED[job["kind"]]))
         row["right"] = bool(set(found.get(effect["axis"], [])) & EXPECTED[job["kind"]])
         model = result["axes"].get(effect["axis"], {}).get("model", {})
         row["error_before"] = model.get("error_before")

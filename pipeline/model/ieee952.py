@@ -1102,6 +1102,11 @@ def terms_from_fit(
                 f"masked: the 1/tau^2 AVAR term is negative (-{prefilter:.3g}/tau^2, 95 % "
                 f"[{3 * lo:.3g}, {3 * hi:.3g}]), the signature of neighbouring samples "
                 "correlated by the sensor's prefilter; quantisation cannot be separated from it"
+                if lo > 0  # else 0 is in its interval: no prefilter's signature shows
+                else f"not resolved: the 1/tau^2 AVAR term fits best negative "
+                f"(-{prefilter:.3g}/tau^2) but its 95 % interval [0, {3 * hi:.3g}] holds 0: "
+                "neither quantisation nor a prefilter's correlation of neighbouring samples "
+                "is resolved"
             )
             terms[name] = NoiseTerm(None, None, None, unit, reason)
         elif lo > 0:
