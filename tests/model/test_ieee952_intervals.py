@@ -460,3 +460,30 @@ def test_a_terms_interval_over_alternative_shapes_is_the_union_within_the_room()
     assert over(1.9) == pytest.approx([1.6526e-4, 2.2991e-4], rel=1e-4)
     assert over(2.1) == pytest.approx([1.6218e-4, 2.2785e-4], rel=1e-4)
     assert over(1.9, 2.1, 2.6) == pytest.approx([1.6218e-4, 2.2991e-4], rel=1e-4)
+
+
+def test_terms_from_fit_widens_only_the_resolved_terms_over_the_alternatives() -> None:
+    """The same Gauss–Markov fit as above, its terms with the τ points' correlation: given the
+    fits at Tc 1.9, 2.1 and 2.6 s, B's interval [1.4866e-4, 2.3734e-4] becomes [1.4381e-4,
+    2.3950e-4] and N's lower end moves; Q, K and R, not resolved, keep their bounds; the
+    values do not change."""
+    tau = 0.01 * 2.0 ** np.arange(18)
+    rng = np.random.default_rng(2)
+    edf = np.maximum(2.6e6 / (tau / 0.01), 3.0)
+    gm = lambda tc: ieee952.effect_shape("gauss_markov", (tc,), 0.01)(tau)  # noqa: E731
+    truth = ieee952.avar_model(tau, random_walk=1e-3, bias_instability=2e-4) + 3e-7 * gm(2.0)
+    avar = truth * rng.chisquare(edf) / edf
+    fits = [ieee952.fit_composite(tau, avar, edf, {"gm": gm(tc)}, np.inf)
+            for tc in (2.0, 1.9, 2.1, 2.6)]  # fmt: skip
+    shapes = {"gm": ("gauss_markov", (2.0,))}
+    sampling = (0.01, np.full(18, 1e5))
+    at = ieee952.terms_from_fit(fits[0], avar, edf, "gyro", "", None, shapes, sampling)
+    over = ieee952.terms_from_fit(fits[0], avar, edf, "gyro", "", None, shapes, sampling, fits[1:])
+    b_at, b_over = at.bias_instability, over.bias_instability
+    assert (b_at.lo, b_at.hi) == pytest.approx((1.4866e-4, 2.3734e-4), rel=1e-4)
+    assert (b_over.lo, b_over.hi) == pytest.approx((1.4381e-4, 2.3950e-4), rel=1e-4)
+    assert over.random_walk.lo < at.random_walk.lo < at.random_walk.value
+    assert over.random_walk.hi == at.random_walk.hi
+    for name in ("quantization", "rate_random_walk", "rate_ramp"):
+        assert getattr(over, name) == getattr(at, name) and getattr(at, name).value is None
+    assert [t.value for t in (over.random_walk, b_over)] == [at.random_walk.value, b_at.value]
