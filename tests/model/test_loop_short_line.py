@@ -143,6 +143,8 @@ def test_a_40_sample_moving_average_is_found_and_n_is_profiled_over_its_length()
     lo, hi = found.intervals["length_s"]
     assert lo == pytest.approx(0.3916, rel=1e-3) and hi == pytest.approx(0.4132, rel=1e-3)
     assert res.terms_after.fit_tau_min_s == 0.01
+    (term,) = res.terms_after.effects  # the filtered white noise, in N's unit
+    assert term.kind == "prefilter" and term.unit == "m/s^2/sqrt(Hz)"
     n, truth = res.terms_after.random_walk, SIGMA * np.sqrt(TAU0)
     assert n.value / truth == pytest.approx(1.0083, abs=1e-4)
     assert n.lo / truth == pytest.approx(0.9853, abs=1e-3)
