@@ -435,19 +435,30 @@ def test_profile_end_refitted_from_its_own_solution_lies_within_the_limit() -> N
     assert hi / fit.coef[j] == pytest.approx(2.14359, rel=1e-3)
 
 
-def test_a_terms_interval_over_alternative_shapes_is_the_union_within_the_room() -> None:
-    """``over_alternatives``: a Gauss–Markov column at Tc 2 s fitted beside white noise and
-    flicker.  The same fit with Tc 1.9 s (ΔD 0.34) widens B's upper end from 2.2785e-4 to
-    2.2991e-4, with Tc 2.1 s (ΔD 0.68) its lower end from 1.6526e-4 to 1.6218e-4; Tc 2.6 s
-    (ΔD 15.8, beyond χ²₁(0.95) φ) leaves the interval as it was, as no alternative does."""
+def _gauss_markov_fits() -> tuple[np.ndarray, np.ndarray, dict[float, ieee952.CompositeFit]]:
+    """(AVAR, EDF, {Tc: fit}): white noise, flicker and a Gauss–Markov process of Tc 2 s on 18
+    octave τ from 0.01 s (gamma scatter, seed 2), fitted with its column at Tc 2.0, 1.9, 2.1
+    and 2.6 s."""
     tau = 0.01 * 2.0 ** np.arange(18)
     rng = np.random.default_rng(2)
     edf = np.maximum(2.6e6 / (tau / 0.01), 3.0)
     gm = lambda tc: ieee952.effect_shape("gauss_markov", (tc,), 0.01)(tau)  # noqa: E731
     truth = ieee952.avar_model(tau, random_walk=1e-3, bias_instability=2e-4) + 3e-7 * gm(2.0)
     avar = truth * rng.chisquare(edf) / edf
-    fits = {tc: ieee952.fit_composite(tau, avar, edf, {"gm": gm(tc)}, np.inf)
-            for tc in (2.0, 1.9, 2.1, 2.6)}  # fmt: skip
+    tcs = (2.0, 1.9, 2.1, 2.6)
+    return (
+        avar,
+        edf,
+        {tc: ieee952.fit_composite(tau, avar, edf, {"gm": gm(tc)}, np.inf) for tc in tcs},
+    )
+
+
+def test_a_terms_interval_over_alternative_shapes_is_the_union_within_the_room() -> None:
+    """``over_alternatives``: a Gauss–Markov column at Tc 2 s fitted beside white noise and
+    flicker.  The same fit with Tc 1.9 s (ΔD 0.34) widens B's upper end from 2.2785e-4 to
+    2.2991e-4, with Tc 2.1 s (ΔD 0.68) its lower end from 1.6526e-4 to 1.6218e-4; Tc 2.6 s
+    (ΔD 15.8, beyond χ²₁(0.95) φ) leaves the interval as it was, as no alternative does."""
+    avar, edf, fits = _gauss_markov_fits()
     best, j = fits[2.0], 2  # B
     interval = best.profile_interval(avar, edf, j)
     assert np.sqrt(interval) == pytest.approx([1.6526e-4, 2.2785e-4], rel=1e-4)
@@ -467,14 +478,8 @@ def test_terms_from_fit_widens_only_the_resolved_terms_over_the_alternatives() -
     fits at Tc 1.9, 2.1 and 2.6 s, B's interval [1.4866e-4, 2.3734e-4] becomes [1.4381e-4,
     2.3950e-4] and N's lower end moves; Q, K and R, not resolved, keep their bounds; the
     values do not change."""
-    tau = 0.01 * 2.0 ** np.arange(18)
-    rng = np.random.default_rng(2)
-    edf = np.maximum(2.6e6 / (tau / 0.01), 3.0)
-    gm = lambda tc: ieee952.effect_shape("gauss_markov", (tc,), 0.01)(tau)  # noqa: E731
-    truth = ieee952.avar_model(tau, random_walk=1e-3, bias_instability=2e-4) + 3e-7 * gm(2.0)
-    avar = truth * rng.chisquare(edf) / edf
-    fits = [ieee952.fit_composite(tau, avar, edf, {"gm": gm(tc)}, np.inf)
-            for tc in (2.0, 1.9, 2.1, 2.6)]  # fmt: skip
+    avar, edf, by_tc = _gauss_markov_fits()
+    fits = list(by_tc.values())
     shapes = {"gm": ("gauss_markov", (2.0,))}
     sampling = (0.01, np.full(18, 1e5))
     at = ieee952.terms_from_fit(fits[0], avar, edf, "gyro", "", None, shapes, sampling)
