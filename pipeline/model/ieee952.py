@@ -533,6 +533,27 @@ class CompositeFit:
         factor = float((naive @ score_var @ naive)[k, k] / naive[k, k])
         return factor if np.isfinite(factor) and factor > 0 else 1.0
 
+    def deviance_scale(self, edf: np.ndarray, j: int, correlation: np.ndarray | None) -> float:
+        """φ·c_j, the unit of coefficient ``j``'s profile deviance: φ the dispersion, c_j the
+        :meth:`sandwich_factor` of the fitted points' ``correlation`` (1 without one)."""
+        adjust = 1.0 if correlation is None else self.sandwich_factor(edf, correlation, j)
+        return self.dispersion * adjust
+
+    def interval_within(
+        self,
+        avar: np.ndarray,
+        edf: np.ndarray,
+        j: int,
+        room: float,
+        correlation: np.ndarray | None = None,
+    ) -> tuple[float, float]:
+        """The :meth:`profile_interval` of coefficient ``j`` whose deviance may rise by ``room``
+        (deviance units) over this fit's: at the level whose φ·c_j·χ²₁ is ``room`` (at least
+        1e-9) — a fit at another non-linear shape, which has used part of the room already."""
+        scale = self.deviance_scale(edf, j, correlation)
+        level = float(special.gammainc(0.5, room / scale / 2))  # χ²₁'s cdf
+        return self.profile_interval(avar, edf, j, max(level, 1e-9), correlation)
+
     def profile_interval(
         self,
         avar: np.ndarray,
@@ -549,8 +570,7 @@ class CompositeFit:
         x, a, nu = self.design[idx], avar[idx], self.nu(edf)
         others = np.delete(x, j, axis=1)
         at_best = np.delete(self.coef, j)
-        adjust = 1.0 if correlation is None else self.sandwich_factor(edf, correlation, j)
-        limit = self.dispersion * adjust * chi2_ppf_1dof(level)
+        limit = self.deviance_scale(edf, j, correlation) * chi2_ppf_1dof(level)
         solved: list[tuple[float, np.ndarray]] = [(float(self.coef[j]), at_best)]
 
         def excess(c: float) -> float:
@@ -1025,22 +1045,16 @@ def over_alternatives(
     deviance of the coefficient is the least over the shape, so its interval is the union over
     the alternatives within ΔD = D − D_min ≤ φ c_j χ²₁(0.95) of each one's interval at the
     remaining room (φ the dispersion and c_j the :meth:`CompositeFit.sandwich_factor` of
-    ``fit``; the same construction as the effects' own values, ``loop._column_profile``).  An
+    ``fit``; :meth:`CompositeFit.interval_within`, as the effects' own values are).  An
     alternative on which the coefficient is not resolved widens only the upper end: the term
     stays reported as resolved, its lower end the least resolved one."""
     lo, hi = interval
-
-    def scale(f: CompositeFit) -> float:
-        adjust = 1.0 if correlation is None else f.sandwich_factor(edf, correlation, j)
-        return f.dispersion * adjust
-
-    phi = scale(fit)
+    phi = fit.deviance_scale(edf, j, correlation)
     for alt in alternatives:
         room = chi2_ppf_1dof(0.95) - (alt.deviance - fit.deviance) / phi
         if room <= 0:
             continue
-        level = float(special.gammainc(0.5, room * phi / scale(alt) / 2))  # χ²₁'s cdf
-        a_lo, a_hi = alt.profile_interval(avar, edf, j, max(level, 1e-9), correlation)
+        a_lo, a_hi = alt.interval_within(avar, edf, j, room * phi, correlation)
         lo = min(lo, a_lo) if a_lo > 0 else lo
         hi = max(hi, a_hi)
     return lo, hi

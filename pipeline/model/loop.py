@@ -875,7 +875,7 @@ def _column_profile(
     fits, fit_at = searched
     best_spec, best = _best(fits)
     rho = ieee952.fit_correlation(best, *sampling)
-    phi = best.dispersion * best.sandwich_factor(edf, rho, best.names.index("_new"))
+    phi = best.deviance_scale(edf, best.names.index("_new"), rho)
     out = {}
     i, name = SHAPE_PARAMETER.get(kind, (0, ""))
     values = np.unique([spec[i] for spec, _ in fits])
@@ -907,10 +907,7 @@ def _column_profile(
     inside = np.flatnonzero(room >= 0)
     for j in inside[np.argsort(-room[inside])][:PROFILE_SHAPES]:
         fit = fits[j][1]
-        new = fit.names.index("_new")
-        scale = fit.dispersion * fit.sandwich_factor(edf, rho, new)
-        level = float(special.gammainc(0.5, room[j] * phi / scale / 2))  # chi2.cdf
-        bounds.append(fit.profile_interval(avar, edf, new, max(level, 1e-9), correlation=rho))
+        bounds.append(fit.interval_within(avar, edf, fit.names.index("_new"), room[j] * phi, rho))
     lo, hi = np.sqrt(np.min(bounds)), np.sqrt(np.max(bounds))
     value = {"gauss_markov": "sigma", "narrowband": "rms", "sinusoid": "amplitude"}
     return {value.get(kind, "white_filtered"): [float(lo), float(hi)]} | out
@@ -1133,13 +1130,10 @@ def close_loop(signals: AxisSignals, curve: AllanCurve) -> LoopResult:
         rejected.pop(chosen.trial.kind, None)
         if chosen.trial.fit_start is not None:  # a short-τ term: the range grows from here on
             ax.tau_min, note = chosen.trial.fit_start
-            terms = [c for c in (chosen.trial.cand, chosen.trial.joint) if c is not None]
-            ax.fit_note = f"{note} (with {_short_terms(terms)} below the baseline's fit start "
-            ax.fit_note += "modelled)"
+            terms = _short_terms(chosen.trial.candidates)
+            ax.fit_note = f"{note} (with {terms} below the baseline's fit start modelled)"
             good = goodness(state.fit(ax), tau, state.avar, edf)  # error before, same τ
-        state = chosen.trial.state.with_shape_intervals(
-            [c for c in (chosen.trial.cand, chosen.trial.joint) if c is not None]
-        )
+        state = chosen.trial.state.with_shape_intervals(chosen.trial.candidates)
         new_fit = state.fit(ax)
         new_good = goodness(new_fit, tau, state.avar, edf)
         accepted.extend(chosen.accepted(good.error, new_good.error))
@@ -2122,6 +2116,11 @@ class Trial:
     joint: effects.Candidate | None = None
     """A second line added with ``cand`` (:func:`_short_lines_joint`: two lines below the fit
     start that widen the range only together); ``None``: ``cand`` alone."""
+
+    @property
+    def candidates(self) -> list[effects.Candidate]:
+        """``cand`` and, if any, the :attr:`joint` line added with it."""
+        return [c for c in (self.cand, self.joint) if c is not None]
 
 
 @dataclass(frozen=True)
