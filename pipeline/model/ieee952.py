@@ -31,7 +31,8 @@ exactly (sum of m samples and the covariance of adjacent sums, cf. IEEE Std 1139
 i.e. the IEEE 952 random-walk term with N² = τ0 S plus a 1/τ² term whose sign is that of
 −Σ k r(k): negative for a low-pass prefilter.  The quantisation column 3/τ² therefore may take
 either sign (``prefilter=True``, as :func:`fit_noise_terms` fits: the better sign is kept); a
-negative term is reported as the prefilter's, not as Q, which is then unresolvable.  Below
+resolved negative term is reported as the prefilter's, not as Q, which is then unresolvable; an
+unresolved one (0 in its interval) leaves Q a bound, profiled over the column's sign.  Below
 m = L − 1 the shape is filter-specific, so the fit starts at the first octave τ that a
 sequential deletion test (:func:`fit_start`) accepts.
 """
@@ -554,6 +555,21 @@ class CompositeFit:
         level = float(special.gammainc(0.5, room / scale / 2))  # χ²₁'s cdf
         return self.profile_interval(avar, edf, j, max(level, 1e-9), correlation)
 
+    def as_quantization(self, avar: np.ndarray, edf: np.ndarray) -> CompositeFit:
+        """This fit with its 3/τ² column read as quantisation (sign +1) and refitted at the
+        same flicker cut-off and effect shapes: the fit a Q bound is profiled in when the
+        column fits best negative but not significantly (:func:`terms_from_fit`)."""
+        if self.short_sign > 0:
+            return self
+        design = self.design.copy()
+        design[:, 0] = -design[:, 0]
+        start = self.coef.copy()
+        start[0] = 0.0
+        coef, deviance = fit_nonneg_gamma(
+            design[self.fit_index], avar[self.fit_index], self.nu(edf), 0.0, start
+        )
+        return replace(self, coef=coef, design=design, deviance=deviance, short_sign=1)
+
     def profile_interval(
         self,
         avar: np.ndarray,
@@ -1060,6 +1076,20 @@ def over_alternatives(
     return lo, hi
 
 
+def _quantization_bound(
+    fit: CompositeFit, avar: np.ndarray, edf: np.ndarray, correlation: np.ndarray | None
+) -> float:
+    """Q²'s 95 % upper bound (u² s²) where the 3/τ² column of ``fit`` fits best negative with 0
+    in its interval: the largest Q² ≥ 0 whose profile deviance (the column read as
+    quantisation, :meth:`CompositeFit.as_quantization`) lies within φ·c·χ²₁(0.95) of the
+    signed column's best ``fit`` — one profile over the signed coefficient, −P … +Q², cut at
+    the same deviance as every other term's interval."""
+    positive = fit.as_quantization(avar, edf)
+    limit = fit.deviance_scale(edf, 0, correlation) * chi2_ppf_1dof(0.95)
+    room = limit - (positive.deviance - fit.deviance)
+    return positive.interval_within(avar, edf, 0, room, correlation)[1]
+
+
 def terms_from_fit(
     fit: CompositeFit,
     avar: np.ndarray,
@@ -1110,19 +1140,27 @@ def terms_from_fit(
             )
         capped = caps[j] < hi_profile
         hi = min(hi_profile, caps[j])  # an unresolved term: at most what the curve allows
-        if j == 0 and fit.short_sign < 0:
+        if j == 0 and fit.short_sign < 0 and lo > 0:
             prefilter = float(3.0 * fit.coef[0])
             reason = (
                 f"masked: the 1/tau^2 AVAR term is negative (-{prefilter:.3g}/tau^2, 95 % "
                 f"[{3 * lo:.3g}, {3 * hi:.3g}]), the signature of neighbouring samples "
                 "correlated by the sensor's prefilter; quantisation cannot be separated from it"
-                if lo > 0  # else 0 is in its interval: no prefilter's signature shows
-                else f"not resolved: the 1/tau^2 AVAR term fits best negative "
-                f"(-{prefilter:.3g}/tau^2) but its 95 % interval [0, {3 * hi:.3g}] holds 0: "
-                "neither quantisation nor a prefilter's correlation of neighbouring samples "
-                "is resolved"
             )
             terms[name] = NoiseTerm(None, None, None, unit, reason)
+        elif j == 0 and fit.short_sign < 0:  # 0 in the negative term's interval: Q's bound
+            prefilter = float(3.0 * fit.coef[0])
+            hi = min(_quantization_bound(fit, avar, edf, correlated), caps[0])
+            reason = (
+                f"not resolved for {tau_lo:.4g} s <= tau <= {tau_hi:.4g} s: 95 % upper bound "
+                f"{np.sqrt(hi):.3g} {unit} (profile likelihood over the 1/tau^2 term's sign: "
+                f"it fits best negative, -{prefilter:.3g}/tau^2, with 0 in its 95 % interval "
+                f"[0, {3 * hi_profile:.3g}], so no prefilter's correlation of neighbouring "
+                "samples is resolved either)"
+            )
+            if misfit:
+                reason += f"; {misfit}"
+            terms[name] = NoiseTerm(None, None, float(np.sqrt(hi)), unit, reason)
         elif lo > 0:
             # a resolved term's interval: the profile's; B's is also held to a possible plateau
             # (others may lie above the curve where the negative prefilter term offsets them),

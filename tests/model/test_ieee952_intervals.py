@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import integrate
+from scipy import integrate, optimize
 
 from imupipe.model import ieee952
 from imupipe.stats.avar_covariance import avar_correlation
@@ -214,12 +214,15 @@ def test_asymptote_caps_written_out() -> None:
     assert np.all(ieee952.asymptote_caps(tau, np.full(4, np.nan), 2.0) == np.inf)
 
 
-def test_a_negative_short_term_whose_interval_holds_zero_claims_no_prefilter() -> None:
+def test_a_negative_short_term_whose_interval_holds_zero_leaves_q_its_bound() -> None:
     """White noise alone (AVAR N²/τ with gamma scatter): the 1/τ² column fits best negative on
     5 of 12 seeds, its interval [0, …] holding 0.  Until session 45 Q was then reported as
     masked by "the signature of neighbouring samples correlated by the sensor's prefilter"
-    (measured: 4 of 24 clean axes of the independent generator, 1 h at 100 Hz); now neither
-    is resolved, and the reason says why."""
+    (measured: 4 of 24 clean axes of the independent generator, 1 h at 100 Hz); in session 45
+    as unresolved with no bound at all ("—" in the demo's table on 3 of 6 axes).  Now Q has the
+    bound of one profile over the signed coefficient: the largest Q² ≥ 0 whose deviance, the
+    column read as quantisation and the others refitted, stays within φ·χ²₁(0.95) of the
+    negative best fit — solved here by hand with brentq."""
     tau = 0.04 * 2.0 ** np.arange(16)
     edf = 1e5 / 2.0 ** np.arange(16) + 3.0
     avar = (1e-6 / tau) * np.random.default_rng(2).chisquare(edf) / edf
@@ -228,12 +231,32 @@ def test_a_negative_short_term_whose_interval_holds_zero_claims_no_prefilter() -
     lo, hi = fit.profile_interval(avar, edf, 0)
     assert lo == 0.0
     q = ieee952.terms_from_fit(fit, avar, edf, "gyro").quantization
-    assert q.value is None and "signature" not in q.reason
+    assert q.value is None and q.lo is None and "signature" not in q.reason
     assert q.reason == (
-        f"not resolved: the 1/tau^2 AVAR term fits best negative (-{3 * fit.coef[0]:.3g}/tau^2) "
-        f"but its 95 % interval [0, {3 * hi:.3g}] holds 0: neither quantisation nor a "
-        "prefilter's correlation of neighbouring samples is resolved"
+        "not resolved for 0.04 s <= tau <= 1311 s: 95 % upper bound "
+        f"{q.hi:.3g} rad (profile likelihood over the 1/tau^2 term's sign: it fits best "
+        f"negative, -{3 * fit.coef[0]:.3g}/tau^2, with 0 in its 95 % interval [0, {3 * hi:.3g}], "
+        "so no prefilter's correlation of neighbouring samples is resolved either)"
     )
+    idx = fit.fit_index
+    x = ieee952.design_columns(tau)[idx]  # column 0: +3/τ², quantisation
+    nu = fit.nu(edf)
+    limit = fit.dispersion * CHI2_1_95
+
+    def excess(q2: float) -> float:
+        starts = (np.zeros(4), np.delete(fit.coef, 0))
+        dev = min(
+            ieee952.fit_nonneg_gamma(x[:, 1:], avar[idx], nu, q2 * x[:, 0], s)[1] for s in starts
+        )
+        return dev - fit.deviance - limit
+
+    assert excess(0.0) < 0  # 0 is inside: Q² = 0 is as good as the negative fit allows
+    q2_hi = optimize.brentq(excess, 0.0, 1e-8, xtol=1e-20, rtol=1e-10)
+    assert q.hi**2 == pytest.approx(q2_hi, rel=1e-4)
+    # cut at the signed best fit's deviance, not the positive fit's own: tighter than the bound
+    # of the fit that never tries the negative sign
+    alone = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf, prefilter=False)
+    assert q.hi < 0.95 * ieee952.terms_from_fit(alone, avar, edf, "gyro").quantization.hi
 
 
 def test_negative_short_term_is_reported_as_the_prefilter_with_its_interval() -> None:
