@@ -862,12 +862,12 @@ def test_the_roll_off_is_read_against_the_models_spectrum():
 def test_a_gauss_markov_hump_competes_with_lines_a_factor_3_either_side_only(base, line_hz, seen):
     """A Gauss–Markov candidate of Tc = 19.6 s peaks at the τ of a sinusoid of f = 0.196 / Tc
     = 0.01 Hz; the spectrum's view reads the strongest periodogram line in [f/3, 3f] against
-    its local floor (``competing_line``, which refuses the label when it stands out).  A tone of
-    10 B (B = 0.008 °/s, the paper's gyro) inside that band, at 0.004 or 0.027 Hz, is the competing line; at 0.0027 Hz or
-    0.0335 Hz, just outside, it is not (the view then reads the noise's strongest bin).  The
-    band was pinned by no test until session 46 (mutants [f/3, 2f], [f/3, f − 3], [f/3, f³],
-    [f // 3, 3f], [f³, 3f] and f = 0.196 % Tc survived)."""
-    rng, y = base(46)
+    its local floor (``competing_line``, which refuses the label when it stands out).  A tone
+    of 10 B (B = 0.008 °/s, the paper's gyro) inside that band, at 0.004 or 0.027 Hz, is the
+    competing line; at 0.0027 Hz or 0.0335 Hz, just outside, it is not (the view then reads
+    the noise's strongest bin).  The band was pinned by no test until session 46 (mutants
+    [f/3, 2f], [f/3, f − 3], [f/3, f³], [f // 3, 3f], [f³, 3f] and f = 0.196 % Tc survived)."""
+    _, y = base(46)
     t = np.arange(N) * TAU0
     y = y + 10 * np.radians(0.008) * np.sin(2 * np.pi * line_hz * t + 0.3)
     ax = loop._Axis(AxisSignals("gyro_x", "gyro", y, TAU0, None, None), allan_curves(y, TAU0)[0])
