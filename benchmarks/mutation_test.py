@@ -268,7 +268,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     ),
     "pipeline/analysis/workers.py": ("tests/analysis/test_workers.py", "tests/test_api.py"),
     "pipeline/recording/spi.py": ("tests/recording/test_spi.py",),
-    "pipeline/progress.py": ("tests/io/test_column_notes.py",),
+    "pipeline/progress.py": ("tests/test_progress.py", "tests/io/test_column_notes.py"),
     "pipeline/stopping.py": ("tests/test_hostile.py",),
     "pipeline/fleet/rerun_view.py": (
         "tests/report/test_rerun_view.py",

@@ -18,6 +18,7 @@ import rerun.blueprint as rrb
 import imupipe.report.rerun_view as rv
 from imupipe.analysis.events import DisturbanceEvent, EventDetector, EventsFound
 from imupipe.errors import ViewerError
+from imupipe.fleet.curves import UNIT_COLUMN
 from imupipe.report.rerun_view import open_viewer, rerun_executable, signal_columns, write_rrd
 from imupipe.units import from_si
 
@@ -256,6 +257,99 @@ def test_fleet_view_names_units_by_path_and_labels_the_band_where_it_is_widest()
     }
     at = rec.logged["allan/gyro_x/population/hi/label"].positions.as_arrow_array().to_pylist()
     assert at[0] == pytest.approx([3.0, -np.log10(pop["hi"][-1])])  # log10 τ = 3, y down
+
+
+def _fleet(axes: dict[str, tuple[str, float]]) -> tuple[pl.DataFrame, pl.DataFrame]:
+    """Five units' curves on each axis (``{axis: (unit, ADEV at 1 s)}``), and their population."""
+    from imupipe.analysis.results import ALLAN_SCHEMA
+    from imupipe.fleet.curves import fleet_frame, population_curves
+
+    tau = np.geomspace(0.01, 1000.0, 11)
+    curves: dict[str, list[pl.DataFrame]] = {f"u{k}": [] for k in range(5)}
+    for axis, (unit, a1) in axes.items():
+        curve = pl.DataFrame(
+            {"axis": axis, "unit": unit, "tau": tau, "adev": a1 / np.sqrt(tau),
+             "lo": np.nan, "hi": np.nan, "edf": 1.0, "terms": 1, "alpha": 0.0,
+             "adev_after": np.nan, "model_before": np.nan, "model_after": np.nan,
+             "z_before": np.nan, "z_after": np.nan},
+            schema=ALLAN_SCHEMA,
+        )  # fmt: skip
+        for k, parts in enumerate(curves.values()):
+            parts.append(curve.with_columns(pl.col("adev") * (1 + k / 10)))
+    fleet = fleet_frame({name: pl.concat(parts) for name, parts in curves.items()})
+    return fleet, population_curves(fleet)
+
+
+def test_fleet_rrd_has_a_tab_per_axis_holding_only_that_axis_units_and_population(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """fleet.rrd of units measured on gyro_x and accel_x: one tab per axis in report order, the
+    viewer's panels collapsed and no view of its own guessing; each axis' view draws that axis'
+    five unit curves, its population lines and a σ grid in its unit, all static (shown wherever
+    the time cursor is).  An axis' view drawing the other axis' units or population, or none,
+    passed the one-axis test."""
+    from imupipe.fleet import rerun_view as fleet_view
+
+    rec, sent = _KeepLogs(), []
+    rec.save = rec.flush = rec.disconnect = lambda *a: None
+    monkeypatch.setattr(fleet_view, "open_stream", lambda app: rec)
+    monkeypatch.setattr(fleet_view, "send_blueprint", lambda r, bp: sent.append(bp))
+    fleet, pop = _fleet({"accel_x": ("m/s²", 1e-4), "gyro_x": ("rad/s", 1e-3)})
+    path = tmp_path / "fleet.rrd"
+    assert fleet_view.write_fleet_rrd(fleet, pop, path) == path
+    ((bp,),) = [sent]
+    assert (bp.collapse_panels, bp.auto_views) == (True, False)
+    views = _views(bp.root_container)
+    assert [(v.origin, v.name) for v in views] == [
+        (f"allan/{a}", f"{a}: log10 ADEV vs log10 τ") for a in ("gyro_x", "accel_x")
+    ]
+    for axis, unit in (("gyro_x", "rad/s"), ("accel_x", "m/s²")):
+        base = f"allan/{axis}"
+        units = sorted(p for p in rec.logged if p.startswith(f"{base}/units/"))
+        assert units == [f"{base}/units/u{k}" for k in range(5)]
+        for k in range(5):
+            mine = fleet.filter((pl.col("axis") == axis) & (pl.col(UNIT_COLUMN) == f"u{k}"))
+            expected = np.column_stack([np.log10(mine["tau"]), -np.log10(mine["adev"])])
+            np.testing.assert_allclose(_points(rec.logged[f"{base}/units/u{k}"]), expected)
+        own = pop.filter(pl.col("axis") == axis)
+        for name in ("median", "lo", "hi"):
+            expected = np.column_stack([np.log10(own["tau"]), -np.log10(own[name])])
+            np.testing.assert_allclose(_points(rec.logged[f"{base}/population/{name}"]), expected)
+        assert f"1e-3 {unit}" in _labels(rec.logged[f"{base}/grid_labels"])
+    assert all(rec.static.values()) and len(rec.static) == 2 * (5 + 3 + 3 + 2)
+
+
+def test_fleet_view_draws_thin_grey_units_under_the_blue_band_and_median() -> None:
+    """The units thin and grey, under the population: the band's edges light blue, both as
+    wide, under the wider median in the report's blue (tab:blue); each label's dot in its
+    line's colour and width, drawn over everything."""
+    from imupipe.fleet import rerun_view as fleet_view
+
+    fleet, pop = _fleet({"gyro_x": ("rad/s", 1e-3)})
+    rec = _KeepLogs()
+    fleet_view._log_axis(rec, "gyro_x", fleet, pop)
+
+    def rgb(path: str) -> tuple[int, int, int]:
+        (c,) = set(rec.logged[path].colors.as_arrow_array().to_pylist())
+        return c >> 24, (c >> 16) & 255, (c >> 8) & 255
+
+    def width(path: str) -> float:  # UI points (stored negative: rerun's convention)
+        return abs(rec.logged[path].radii.as_arrow_array().to_pylist()[0])
+
+    def order(path: str) -> float:
+        return rec.logged[path].draw_order.as_arrow_array().to_pylist()[0]
+
+    units = [p for p in rec.logged if p.startswith("allan/gyro_x/units/")]
+    lines = [f"allan/gyro_x/population/{n}" for n in ("median", "lo", "hi")]
+    assert {rgb(p) for p in units} == {(150, 150, 150)}
+    assert [rgb(p) for p in lines] == [(31, 119, 180), (120, 170, 210), (120, 170, 210)]
+    assert {width(p) for p in units} == {1.0}
+    assert [width(p) for p in lines] == [2.5, 1.5, 1.5]
+    for line in lines:
+        assert (rgb(f"{line}/label"), width(f"{line}/label")) == (rgb(line), width(line))
+    assert {order(p) for p in units} == {1}
+    assert {order(p) for p in lines} == {2}
+    assert {order(f"{p}/label") for p in lines} == {3}
 
 
 def _with_events(result, spans: list[tuple[int, int] | None], tau0: float, t0: float):
