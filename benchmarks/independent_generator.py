@@ -52,10 +52,13 @@ EFFECT_KINDS = (
     "vibration",
     "thermal_lag",
     "prefilter",
+    "lowpass",
 )
 """Undeclared effects (``thermal_lag``: the temperature coupling through a first-order lag,
 the heat reaching the sensing element after the thermometer; ``prefilter``: the sensor's own
-low-pass filter on the axis' output).  A supply-voltage coupling is
+low-pass filter on the axis' output, a moving average, Bartlett window or first-order
+low-pass; ``lowpass``: a MEMS part's digital low-pass, a Butterworth of order 2 or 4 run at the
+output rate, as the configurable DLPF of many MEMS IMUs).  A supply-voltage coupling is
 not generated: a sensor_msgs/Imu bag carries no supply channel (nothing could be coupled to
 it)."""
 OVERSAMPLE = 8
@@ -200,9 +203,9 @@ def add_effect(
     ``size`` × the axis' noise ADEV at the effect's characteristic τ (sinusoid 0.371/f, its
     ADEV peak; Gauss-Markov 1.89 Tc; step/event: their duration or T/10; ramp and warm-up:
     T/4 and the warm-up time; temperature and its thermal lag: half its cycle); outliers:
-    ``size`` × 10 × the white-noise sigma of one sample; the sensor's prefilter: its −3 dB
-    bandwidth 0.2 / ``size`` of the sample rate.  Returns the effect's description
-    (SI units)."""
+    ``size`` × 10 × the white-noise sigma of one sample; the sensor's prefilter and a
+    lowpass: its −3 dB bandwidth 0.2 / ``size`` of the sample rate.  Returns the effect's
+    description (SI units)."""
     n = len(y)
     t = np.arange(n) * tau0
     duration = n * tau0
@@ -324,6 +327,15 @@ def add_effect(
         f, h = signal.freqz(num, den, worN=1 << 16, fs=1 / tau0)
         bandwidth = float(f[np.argmax(np.abs(h) ** 2 < 0.5)])
         out |= {"filter": family, "length_s": length_s, "bandwidth_3db_hz": bandwidth}
+    elif kind == "lowpass":
+        # a digital Butterworth low-pass (scipy's bilinear design, prewarped so that its -3 dB
+        # point is exact) on everything the axis outputs, before the LSB rounding
+        order = int(rng.choice([2, 4]))
+        fc = 0.2 / (size * tau0)
+        sos = signal.butter(order, fc, fs=1 / tau0, output="sos")
+        y[:, a] = signal.sosfilt(sos, y[:, a], zi=signal.sosfilt_zi(sos) * y[0, a])[0]
+        out |= {"filter": f"butterworth{order}", "order": order, "bandwidth_3db_hz": fc,
+                "length_s": 1 / (2 * np.pi * fc)}  # fmt: skip
     elif kind == "outliers":
         count = int(rng.integers(30, 200))
         where = rng.choice(n, count, replace=False)

@@ -63,6 +63,7 @@ EXPECTED = {
     "tilt": {"event"},
     "outliers": {"outliers", "spike"},
     "prefilter": {"prefilter", "prefilter term"},
+    "lowpass": {"prefilter", "prefilter term"},
 }
 """Loop kinds that count as the right answer for each generated effect."""
 FIT_TERMS = {"R term", "prefilter term"}

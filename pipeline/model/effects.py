@@ -150,10 +150,35 @@ def oscillator_avar(tau: np.ndarray, f0: float, width_hz: float, tau0: float) ->
     return sampled_avar(tau, tau0, complex(a, -wd), complex(1.0, -a / wd))
 
 
-PREFILTERS = ("moving_average", "bartlett", "first_order")
+BUTTERWORTH_ORDERS = {"butterworth2": 2, "butterworth4": 4}
+"""The Butterworth low-pass families of the sensor's prefilter and their orders."""
+PREFILTERS = ("moving_average", "bartlett", "first_order", *BUTTERWORTH_ORDERS)
 """Families of the sensor's prefilter (:func:`prefilter_avar`)."""
-PREFILTER_SUPPORT = {"moving_average": 1.0, "bartlett": 2.0, "first_order": 40.0}
-"""Each prefilter's autocovariance is 0 (first order: below e^−40) beyond this many lengths."""
+PREFILTER_SUPPORT = {
+    "moving_average": 1.0,
+    "bartlett": 2.0,
+    "first_order": 40.0,
+    **{k: 40.0 / np.sin(np.pi / (2 * n)) for k, n in BUTTERWORTH_ORDERS.items()},
+}
+"""Each prefilter's autocovariance is 0 (first order, Butterworth: below e^−40) beyond this many
+lengths."""
+
+
+def _butterworth_modes(order: int, length_s: float) -> list[tuple[complex, complex]]:
+    """(s, c) per mode of the autocovariance r(t) = Σ Re[c e^{−s|t|}] of unit white noise
+    through the analog Butterworth low-pass of ``order`` whose −3 dB angular frequency is 1/L
+    (L = ``length_s``): H(s) = ∏ 1/(s − p_j) at the left-half-plane poles
+    p_j = e^{iπ(2j + n + 1)/(2n)}/L, r(t) = Σ_i Res_{s = p_i} H(s) H(−s) e^{s|t|} (the inverse
+    Laplace transform of |H|², Papoulis §10), a conjugate pair of poles one mode (c twice the
+    residue), up to a constant factor (:func:`prefilter_avar` normalises it)."""
+    poles = np.exp(1j * np.pi * (2 * np.arange(order) + order + 1) / (2 * order))
+    modes = []
+    for i, p in enumerate(poles):
+        if p.imag < -1e-12:  # the conjugate of a pole already counted
+            continue
+        residue = 1.0 / (np.prod(p - np.delete(poles, i)) * np.prod(-p - poles))
+        modes.append((complex(-p / length_s), complex(residue * (2 if p.imag > 1e-12 else 1))))
+    return modes
 
 
 def _prefilter_autocovariance(kind: str, t: np.ndarray, length_s: float) -> np.ndarray:
@@ -184,13 +209,16 @@ def prefilter_avar(tau: np.ndarray, tau0: float, kind: str, length_s: float) -> 
     IEEE 952 with the prefilter's short-τ shape.
 
     The samples have autocovariance r_k = r(k τ0) (:func:`_prefilter_autocovariance`, aliasing
-    included), scaled so that τ0 Σ_k r_k = 1: N² is the series' long-run PSD level, the N the
-    model reports.  The mean of m samples has variance V(m) = (m r₀ + 2 Σ_{k<m} (m − k) r_k)/m²,
-    and σ²(mτ0) = 2 V(m) − 2 V(2m) (two adjacent means: σ² = Var − Cov, Var(mean of 2m) =
-    (Var + Cov)/2); → 1/τ for m τ0 ≫ L, below it less (the filter's correlation) — exact for
-    every m (IEEE Std 1139 / Allan 1966, cf. :mod:`imupipe.model.ieee952` module doc).
+    included; a Butterworth low-pass in closed form, :func:`_butterworth_avar`), scaled so that
+    τ0 Σ_k r_k = 1: N² is the series' long-run PSD level, the N the model reports. The mean of m
+    samples has variance V(m) = (m r₀ + 2 Σ_{k<m} (m − k) r_k)/m², and σ²(mτ0) = 2 V(m) − 2
+    V(2m) (two adjacent means: σ² = Var − Cov, Var(mean of 2m) = (Var + Cov)/2); → 1/τ for m τ0
+    ≫ L, below it less (the filter's correlation) — exact for every m (IEEE Std 1139 / Allan
+    1966, cf. :mod:`imupipe.model.ieee952` module doc).
     """
     tau = np.asarray(tau, dtype=float)
+    if kind in BUTTERWORTH_ORDERS:
+        return _butterworth_avar(tau, tau0, BUTTERWORTH_ORDERS[kind], length_s)
     m = np.maximum(np.round(tau / tau0).astype(np.int64), 1)
     support = PREFILTER_SUPPORT[kind] * length_s
     lags = np.arange(int(min(np.ceil(support / tau0), 2 * m.max())) + 1)
@@ -205,6 +233,16 @@ def prefilter_avar(tau: np.ndarray, tau0: float, kind: str, length_s: float) -> 
         return (mm * r[0] + 2 * (mm * s0[n] - s1[n])) / mm**2
 
     return 2 * var_mean(m) - 2 * var_mean(2 * m)
+
+
+def _butterworth_avar(tau: np.ndarray, tau0: float, order: int, length_s: float) -> np.ndarray:
+    """:func:`prefilter_avar` of a Butterworth low-pass in closed form: its autocovariance is
+    a sum of modes Re[c e^{−s|t|}] (:func:`_butterworth_modes`), so its sampled AVAR is the sum
+    of their :func:`sampled_avar` s (linear in c), scaled by the samples' long-run level
+    τ0 Σ_k r_k = τ0 Σ_modes Re[c (1 + z)/(1 − z)], z = e^{−s τ0} (the geometric series)."""
+    modes = _butterworth_modes(order, length_s)
+    level = sum(np.real(c * (1 + np.exp(-s * tau0)) / -np.expm1(-s * tau0)) for s, c in modes)
+    return sum(sampled_avar(tau, tau0, s, c) for s, c in modes) / (tau0 * level)
 
 
 @dataclass(frozen=True)
@@ -1530,28 +1568,49 @@ def band_excess(
     welch: Welch | None = None,
 ) -> dict[str, float]:
     """The spectrum's view of a spread line at ``f0`` ± ``width_hz`` (Hz): the mean Welch PSD
-    (Hann, 50 % overlap; Welch 1967) within |f − f0| ≤ w over that of its shoulders
-    2w ≤ |f − f0| ≤ 4w, w = max(``width_hz``, 1.5 bins).
+    (Hann, 50 % overlap; Welch 1967) within |f − f0| ≤ w over that of each of its shoulders,
+    the lower f0 − 4w ≤ f ≤ f0 − 2w (f > 0) and the upper f0 + 2w ≤ f ≤ f0 + 4w,
+    w = max(``width_hz``, 1.5 bins).
 
     Segments of ≈ 2/w samples·s (a power of two, at least 64, at most an eighth of the first
     :data:`PSD_MAX_SAMPLES` samples) resolve the line without splitting it over many noisy
-    bins.  ln(ratio) has standard error √(V_line + V_shoulders) (:func:`welch_band_variance`;
-    the shoulders' two pieces counted as one band, which overstates their variance a little);
-    ``p_value``: one-sided normal P(no excess).  A smooth spectrum (white, flicker, a
-    Gauss–Markov slope) gives a ratio near 1 — only a line or a resonance stands out.
+    bins.  Each ln(ratio) has standard error √(V_line + V_shoulder) (:func:`welch_band_variance`)
+    and its one-sided normal P(no excess).  A line is a local maximum of the spectrum: it
+    stands above both shoulders, so ``line_to_shoulders`` is the lesser ratio and ``p_value``
+    the greater p (an intersection–union test, of level α: Berger 1982, Technometrics 24, 295).
+    A smooth spectrum (white, flicker, a Gauss–Markov slope) gives ratios near 1; the edge of a
+    low-pass passes the band and stops its upper shoulder, but not its lower one — measured:
+    white noise through a second-order Butterworth low-pass at 4 Hz (200 Hz) stood 4.2× above
+    both shoulders pooled, at 2.7 Hz, and was modelled as a vibration.  An upper shoulder beyond
+    the Nyquist frequency is left out (a line near it is judged on its lower one); a line with
+    no spectrum below it (f0 − 2w under the first bin: a "line" as wide as its frequency, which
+    is what a low-pass' edge fits as) cannot show as a maximum: ``p_value`` 1, with
+    ``lower_shoulder_hz`` the f0 − 2w it would need above 0.
     """
     n = min(len(y), PSD_MAX_SAMPLES)
     seg = int(np.clip(2 ** np.round(np.log2(2.0 / (width_hz * tau0))), 64, max(64, n // 8)))
     seg = min(seg, n)
     f, pxx = welch(seg) if welch is not None else welch_psd(y, tau0, seg)
     w = max(width_hz, 1.5 / (seg * tau0))
-    dist = np.abs(f - f0)
-    line, shoulder = dist <= w, (dist >= 2 * w) & (dist <= 4 * w) & (f > 0)
-    if not line.any() or not shoulder.any():
+    offset = f - f0
+    line = np.abs(offset) <= w
+    sides = {
+        "lower": (offset <= -2 * w) & (offset >= -4 * w) & (f > 0),
+        "upper": (offset >= 2 * w) & (offset <= 4 * w),
+    }
+    if not line.any():
         return {}
-    ratio, se = _band_ratio(pxx, line, shoulder, seg, n)
-    return {
-        "line_to_shoulders": ratio,
-        "p_value": float(special.ndtr(-np.log(ratio) / se)),
+    if not sides["lower"].any():
+        return {"line_to_shoulders": np.nan, "p_value": 1.0, "lower_shoulder_hz": f0 - 2 * w}
+    sides = {side: mask for side, mask in sides.items() if mask.any()}
+    out: dict[str, float] = {}
+    for side, shoulder in sides.items():
+        ratio, se = _band_ratio(pxx, line, shoulder, seg, n)
+        out[f"line_to_{side}_shoulder"] = ratio
+        out[f"p_value_{side}"] = float(special.ndtr(-np.log(ratio) / se))
+    weaker = max(sides, key=lambda side: out[f"p_value_{side}"])
+    return out | {
+        "line_to_shoulders": out[f"line_to_{weaker}_shoulder"],
+        "p_value": out[f"p_value_{weaker}"],
         "resolution_hz": 1.0 / (seg * tau0),
     }

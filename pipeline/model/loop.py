@@ -2255,7 +2255,13 @@ def _decide(t: Trial) -> Decision:
             "Gauss-Markov spectrum"
         )
     excess = cand.evidence.get("band_excess")
-    if excess is not None and excess.get("p_value", 1.0) >= ALPHA:
+    if excess is not None and "lower_shoulder_hz" in excess:
+        reasons.append(
+            f"no spectrum below the line to stand above (its lower shoulder would end at "
+            f"{excess['lower_shoulder_hz']:.3g} Hz): a line as wide as its frequency is the "
+            "shape of a low-pass' edge, not a vibration"
+        )
+    elif excess is not None and excess.get("p_value", 1.0) >= ALPHA:
         reasons.append(
             f"no excess of spectral power over the line's shoulders (ratio "
             f"{excess.get('line_to_shoulders', float('nan')):.3g}, p "
@@ -2370,9 +2376,8 @@ def _bandwidth(spec: tuple) -> float:
     """−3 dB bandwidth (Hz) of a prefilter (family, length L s, τ0): moving average 0.443/L,
     Bartlett (sinc⁴) 0.32/L, first-order 1/(2πL)."""
     family, length_s, _ = spec
-    return {"moving_average": 0.443, "bartlett": 0.3195, "first_order": 1 / (2 * np.pi)}[
-        family
-    ] / length_s
+    widths = {"moving_average": 0.443, "bartlett": 0.3195}
+    return widths.get(family, 1 / (2 * np.pi)) / length_s
 
 
 def _holdout_column(ax: _Axis, state: _State, cand: effects.Candidate) -> dict:

@@ -98,6 +98,11 @@ def test_both_views_decide_the_label():
     assert "no excess of spectral power" in _decision("narrowband", {"band_excess": flat}).reason
     peak = {"line_to_shoulders": 40.0, "p_value": 1e-30}
     assert _decision("narrowband", {"band_excess": peak}).accept
+    edge = {"line_to_shoulders": np.nan, "p_value": 1.0, "lower_shoulder_hz": 0.1}
+    assert _decision("narrowband", {"band_excess": edge}).reason == (
+        "no spectrum below the line to stand above (its lower shoulder would end at 0.1 Hz): a "
+        "line as wide as its frequency is the shape of a low-pass' edge, not a vibration"
+    )
     white = {"high_to_mid": 1.01, "p_value": 0.7, "band_hz": [40.0, 50.0]}
     assert "no roll-off above its bandwidth" in _decision("prefilter", {"rolloff": white}).reason
     lowpass = {"high_to_mid": 0.55, "p_value": 1e-40, "band_hz": [40.0, 50.0]}
@@ -155,13 +160,16 @@ def test_the_welch_window_is_scipys_hann_and_the_spectrum_views_leave_scipy_sign
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
-@pytest.mark.parametrize("view", ["rolloff", "rolloff at 2 Hz", "band_excess"])
+@pytest.mark.parametrize(
+    "view", ["rolloff", "rolloff at 2 Hz", "band_excess_lower", "band_excess_upper"]
+)
 def test_the_spectrum_views_p_values_are_calibrated_on_white_noise(view):
     """On white noise the band ratio's z (ln ratio / its standard error) has unit spread, so
     p < 0.05 on 5 % of series: with 1/(K b), the correlated ordinates' variance ignored, the
     spread was 1.47 and p < 1e-3 came ~17x too often.  500 series: the spread within 1 ± 0.1
     (its standard error is ~3 %); the roll-off of a 2 Hz filter too (its bands 0.25–1 Hz and
-    4–16 Hz, 4096-sample segments), read against the white model's spectrum."""
+    4–16 Hz, 4096-sample segments), read against the white model's spectrum; a line's band
+    against each of its shoulders."""
     z = []
     white = effects.NoisePsd(1.0, 0.0, np.inf, 0.0)
     for seed in range(500):
@@ -171,10 +179,31 @@ def test_the_spectrum_views_p_values_are_calibrated_on_white_noise(view):
         elif view == "rolloff at 2 Hz":
             p = effects.psd_rolloff(y, 0.01, None, 2.0, white)["p_value"]
         else:
-            p = effects.band_excess(y, 0.01, 3.0, 0.05)["p_value"]
+            p = effects.band_excess(y, 0.01, 3.0, 0.05)[view.replace("band_excess", "p_value")]
         z.append(-special.ndtri(p))
     assert 0.9 < np.std(z) < 1.1
     assert abs(np.mean(z)) < 0.12
+
+
+def test_a_line_stands_above_both_shoulders_at_the_test_s_level():
+    """A line is a local maximum: its p-value is the greater of its two shoulders' (an
+    intersection–union test), so on white noise p < 0.05 on at most 5 % of series (measured
+    1.8 % of 500: the two sides share the line's band), and a low-pass edge — white noise
+    through a second-order Butterworth at 4 Hz, 200 Hz, whose passband stands 2.1× above its
+    upper shoulder at 2.7 Hz — is no line: the lower shoulder, in the passband, is as high."""
+    p = [effects.band_excess(np.random.default_rng(s).standard_normal(2**16), 0.01, 3.0, 0.05)
+         for s in range(500)]  # fmt: skip
+    assert all(e["p_value"] == max(e["p_value_lower"], e["p_value_upper"]) for e in p)
+    assert np.mean([e["p_value"] < 0.05 for e in p]) == pytest.approx(0.018, abs=0.0005)
+    sos = signal.butter(2, 4.0, fs=200.0, output="sos")
+    edge = signal.sosfilt(sos, np.random.default_rng(1).standard_normal(2**18))
+    view = effects.band_excess(edge, 0.005, 2.7, 0.6)
+    assert view["line_to_upper_shoulder"] > 2 and view["p_value_upper"] < 1e-100
+    assert view["line_to_shoulders"] == view["line_to_lower_shoulder"] < 0.95
+    assert view["p_value"] == view["p_value_lower"] > 0.99
+    # as wide as its frequency: no spectrum below it to stand above
+    wide = effects.band_excess(edge, 0.005, 2.2, 1.05)
+    assert wide["p_value"] == 1.0 and wide["lower_shoulder_hz"] == pytest.approx(0.1, abs=1e-12)
 
 
 def test_spectrum_views_read_the_data():

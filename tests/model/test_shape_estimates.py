@@ -123,9 +123,11 @@ def test_no_prefilter_is_searched_that_leaves_the_samples_white() -> None:
         "moving_average": grid[grid > tau0][0],
         "bartlett": grid[grid > tau0 / 2][0],
         "first_order": grid[0],
+        "butterworth2": grid[0],
+        "butterworth4": grid[0],
     }
     assert max(length for _, length, _ in specs) == pytest.approx(1.28, rel=1e-12)
-    assert len(specs) == 18 + 21 + 24  # of 3 × 24
+    assert len(specs) == 18 + 21 + 3 * 24  # of 5 × 24
     tau = np.array([0.01, 0.02, 0.04])
     one_sample = effects.prefilter_avar(tau, tau0, "moving_average", tau0)
     np.testing.assert_allclose(one_sample, 1 / tau, rtol=1e-12)
