@@ -723,13 +723,22 @@ def crossing_interval(
     censored at the grid's ends.  Linear interpolation between grid points cuts the interval
     short, the chord of a concave room lying under it: on 40 records of a coupling through a
     600 s lag it held the lag on 28, the root on 40; on 63 strong Gauss–Markov effects of the
-    independent generator (2 h, 100 Hz) a grid of ×1.24 steps held Tc on 56."""
+    independent generator (2 h, 100 Hz) a grid of ×1.24 steps held Tc on 56.
+
+    The bracket's ends keep their grid values: ``room_at`` refits there, and a refit of the
+    non-convex fit (or at e^{ln v}, a last bit off v) can land on another branch — measured:
+    a room of 3.84 on the grid read −2.34 again, brentq raised "f(a) and f(b) must have
+    different signs" and `imupipe analyze` ended in a traceback (a Butterworth prefilter of a
+    third of a sample, independent generator recording 4400019)."""
     ok = np.flatnonzero(room >= 0)
     edges = []
     for inside, outside in ((ok[0], ok[0] - 1), (ok[-1], ok[-1] + 1)):
         edge = u[inside]
         if 0 <= outside < len(u):
-            edge = optimize.brentq(room_at, u[inside], u[outside], xtol=XTOL)
+            ends = {u[inside]: room[inside], u[outside]: room[outside]}
+            edge = optimize.brentq(
+                lambda x: ends[x] if x in ends else room_at(x), u[inside], u[outside], xtol=XTOL
+            )
         edges.append(float(np.exp(edge)))
     return edges
 

@@ -50,6 +50,26 @@ def test_an_interval_ends_where_a_concave_room_crosses_zero() -> None:
     assert lo == pytest.approx(100.0 * np.exp(0.05 - half), rel=2e-3)
 
 
+def test_a_refit_that_disagrees_with_the_grid_keeps_the_grids_bracket() -> None:
+    """``room_at`` refits at the bracket's ends, and a non-convex refit can land on another
+    branch: here it reads the grid's best point (room χ²₁(0.95)) at −2.34, as a Butterworth
+    prefilter of a third of a sample did on recording 4400019 of the independent generator,
+    where brentq raised "f(a) and f(b) must have different signs" and the analysis ended in a
+    traceback.  The bracket keeps the grid's values; the root is found between the points."""
+    u = np.log(np.geomspace(1.0, 100.0, 9))
+    best = u[4]
+
+    def room_at(v: float) -> float:
+        if v == best:
+            return -2.34  # another branch
+        return CHI2_95 - ((v - best) / 0.2) ** 2
+
+    room = np.array([CHI2_95 if v == best else room_at(v) for v in u])
+    lo, hi = effects.crossing_interval(u, room, room_at)
+    half = 0.2 * np.sqrt(CHI2_95)
+    assert [lo, hi] == pytest.approx(np.exp([best - half, best + half]), rel=2e-3)
+
+
 @pytest.mark.parametrize("at", [1, -2])
 def test_an_interval_crossing_beside_the_grids_end_is_found_not_censored(at: int) -> None:
     """The room crosses 0 between the grid's end and its neighbour inside (index 1, or the
