@@ -151,7 +151,7 @@ def oscillator_avar(tau: np.ndarray, f0: float, width_hz: float, tau0: float) ->
 
 
 BUTTERWORTH_ORDERS = {"butterworth2": 2, "butterworth4": 4}
-"""The Butterworth low-pass families of the sensor's prefilter and their orders."""
+"""The Butterworth low-pass families of the sensor's prefilter and their (even) orders."""
 PREFILTERS = ("moving_average", "bartlett", "first_order", *BUTTERWORTH_ORDERS)
 """Families of the sensor's prefilter (:func:`prefilter_avar`)."""
 PREFILTER_SUPPORT = {
@@ -165,20 +165,17 @@ lengths."""
 
 
 def _butterworth_modes(order: int, length_s: float) -> list[tuple[complex, complex]]:
-    """(s, c) per mode of the autocovariance r(t) = Σ Re[c e^{−s|t|}] of unit white noise
-    through the analog Butterworth low-pass of ``order`` whose −3 dB angular frequency is 1/L
-    (L = ``length_s``): H(s) = ∏ 1/(s − p_j) at the left-half-plane poles
-    p_j = e^{iπ(2j + n + 1)/(2n)}/L, r(t) = Σ_i Res_{s = p_i} H(s) H(−s) e^{s|t|} (the inverse
-    Laplace transform of |H|², Papoulis §10), a conjugate pair of poles one mode (c twice the
-    residue), up to a constant factor (:func:`prefilter_avar` normalises it)."""
+    """(s, c) per mode of the autocovariance r(t) ∝ Σ Re[c e^{−s|t|}] of unit white noise
+    through the analog Butterworth low-pass of even ``order`` whose −3 dB angular frequency is
+    1/L (L = ``length_s``): H(s) = ∏ 1/(s − p_j) at the left-half-plane poles
+    p_j = e^{iπ(2j + n + 1)/(2n)}/L, conjugate pairs, and r(t) = Σ_i Res_{s = p_i} H(s) H(−s)
+    e^{s|t|} (the inverse Laplace transform of |H|², Papoulis §10): one mode per pair, c its
+    upper pole's residue (the pair's sum is twice its real part; :func:`prefilter_avar`
+    normalises the constant away)."""
     poles = np.exp(1j * np.pi * (2 * np.arange(order) + order + 1) / (2 * order))
-    modes = []
-    for i, p in enumerate(poles):
-        if p.imag < -1e-12:  # the conjugate of a pole already counted
-            continue
-        residue = 1.0 / (np.prod(p - np.delete(poles, i)) * np.prod(-p - poles))
-        modes.append((complex(-p / length_s), complex(residue * (2 if p.imag > 1e-12 else 1))))
-    return modes
+    upper = poles[poles.imag > 0]
+    residues = [1 / (np.prod(p - poles[poles != p]) * np.prod(-p - poles)) for p in upper]
+    return [(complex(-p / length_s), complex(c)) for p, c in zip(upper, residues, strict=True)]
 
 
 def _prefilter_autocovariance(kind: str, t: np.ndarray, length_s: float) -> np.ndarray:
@@ -736,9 +733,11 @@ def crossing_interval(
         edge = u[inside]
         if 0 <= outside < len(u):
             ends = {u[inside]: room[inside], u[outside]: room[outside]}
-            edge = optimize.brentq(
-                lambda x: ends[x] if x in ends else room_at(x), u[inside], u[outside], xtol=XTOL
-            )
+
+            def bracketed(x: float, ends: dict = ends) -> float:
+                return ends[x] if x in ends else room_at(x)
+
+            edge = optimize.brentq(bracketed, u[inside], u[outside], xtol=XTOL)
         edges.append(float(np.exp(edge)))
     return edges
 

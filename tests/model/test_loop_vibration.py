@@ -206,6 +206,19 @@ def test_a_line_stands_above_both_shoulders_at_the_test_s_level():
     assert wide["p_value"] == 1.0 and wide["lower_shoulder_hz"] == pytest.approx(0.1, abs=1e-12)
 
 
+def test_a_narrow_line_on_a_short_record_is_read_at_the_records_resolution():
+    """A 0.01 Hz wide line on 2^14 samples at 100 Hz would want segments of 2/(w τ0) = 20000
+    samples; they are capped at an eighth of the record (2048: 0.0488 Hz bins, eight segments'
+    worth of averaging), and the line's band is at least ±1.5 bins: a 0.001 Hz line at
+    0.05 Hz has its lower shoulder at 0.05 − 2 × 0.0732 Hz, below 0 — no line."""
+    y = np.random.default_rng(3).standard_normal(2**14)
+    view = effects.band_excess(y, 0.01, 3.0, 0.01)
+    assert view["resolution_hz"] == 100 / 2048
+    low = effects.band_excess(y, 0.01, 0.05, 0.001)
+    assert low["p_value"] == 1.0
+    assert low["lower_shoulder_hz"] == pytest.approx(0.05 - 2 * 1.5 * 100 / 2048, abs=1e-12)
+
+
 def test_spectrum_views_read_the_data():
     rng = np.random.default_rng(5)
     white = rng.standard_normal(2**18)
