@@ -1150,13 +1150,18 @@ def terms_from_fit(
             terms[name] = NoiseTerm(None, None, None, unit, reason)
         elif j == 0 and fit.short_sign < 0:  # 0 in the negative term's interval: Q's bound
             prefilter = float(3.0 * fit.coef[0])
-            hi = min(_quantization_bound(fit, avar, edf, correlated), caps[0])
+            bound = _quantization_bound(fit, avar, edf, correlated)
+            hi = min(bound, caps[0])
+            how = (
+                "its asymptote reaches the measured deviation's upper confidence bound"
+                if caps[0] < bound
+                else "profile likelihood over the 1/tau^2 term's sign"
+            )
             reason = (
                 f"not resolved for {tau_lo:.4g} s <= tau <= {tau_hi:.4g} s: 95 % upper bound "
-                f"{np.sqrt(hi):.3g} {unit} (profile likelihood over the 1/tau^2 term's sign: "
-                f"it fits best negative, -{prefilter:.3g}/tau^2, with 0 in its 95 % interval "
-                f"[0, {3 * hi_profile:.3g}], so no prefilter's correlation of neighbouring "
-                "samples is resolved either)"
+                f"{np.sqrt(hi):.3g} {unit} ({how}; the term fits best negative, "
+                f"-{prefilter:.3g}/tau^2, with 0 in its 95 % interval [0, {3 * hi_profile:.3g}], "
+                "so no prefilter's correlation of neighbouring samples is resolved either)"
             )
             if misfit:
                 reason += f"; {misfit}"

@@ -232,11 +232,14 @@ def test_a_negative_short_term_whose_interval_holds_zero_leaves_q_its_bound() ->
     assert lo == 0.0
     q = ieee952.terms_from_fit(fit, avar, edf, "gyro").quantization
     assert q.value is None and q.lo is None and "signature" not in q.reason
+    tail = (
+        f"the term fits best negative, -{3 * fit.coef[0]:.3g}/tau^2, with 0 in its 95 % "
+        f"interval [0, {3 * hi:.3g}], so no prefilter's correlation of neighbouring samples is "
+        "resolved either)"
+    )
     assert q.reason == (
-        "not resolved for 0.04 s <= tau <= 1311 s: 95 % upper bound "
-        f"{q.hi:.3g} rad (profile likelihood over the 1/tau^2 term's sign: it fits best "
-        f"negative, -{3 * fit.coef[0]:.3g}/tau^2, with 0 in its 95 % interval [0, {3 * hi:.3g}], "
-        "so no prefilter's correlation of neighbouring samples is resolved either)"
+        f"not resolved for 0.04 s <= tau <= 1311 s: 95 % upper bound {q.hi:.3g} rad (profile "
+        f"likelihood over the 1/tau^2 term's sign; {tail}"
     )
     idx = fit.fit_index
     x = ieee952.design_columns(tau)[idx]  # column 0: +3/τ², quantisation
@@ -253,6 +256,18 @@ def test_a_negative_short_term_whose_interval_holds_zero_leaves_q_its_bound() ->
     assert excess(0.0) < 0  # 0 is inside: Q² = 0 is as good as the negative fit allows
     q2_hi = optimize.brentq(excess, 0.0, 1e-8, xtol=1e-20, rtol=1e-10)
     assert q.hi**2 == pytest.approx(q2_hi, rel=1e-4)
+    # an asymptote 3Q²/τ² above the measured deviation's upper confidence bound is impossible:
+    # the bound is held under it (an upper confidence bound at 0.04 s that allows half of it)
+    avar_hi = 1.02 * avar
+    avar_hi[0] = 0.5 * 3 * q2_hi / tau[0] ** 2
+    capped = ieee952.terms_from_fit(fit, avar, edf, "gyro", avar_hi=avar_hi).quantization
+    q2_cap = ieee952.asymptote_caps(tau, avar_hi, 0.04)[0]
+    assert q2_cap == pytest.approx(0.5 * q2_hi, rel=1e-12)
+    assert capped.hi**2 == pytest.approx(q2_cap, rel=1e-12)
+    assert capped.reason == (
+        f"not resolved for 0.04 s <= tau <= 1311 s: 95 % upper bound {capped.hi:.3g} rad (its "
+        f"asymptote reaches the measured deviation's upper confidence bound; {tail}"
+    )
     # cut at the signed best fit's deviance, not the positive fit's own: tighter than the bound
     # of the fit that never tries the negative sign
     alone = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf, prefilter=False)
