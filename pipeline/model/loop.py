@@ -2374,10 +2374,11 @@ def _column_candidate(kind, spec, fit_new, state, ax) -> effects.Candidate:
 
 def _bandwidth(spec: tuple) -> float:
     """−3 dB bandwidth (Hz) of a prefilter (family, length L s, τ0): moving average 0.443/L,
-    Bartlett (sinc⁴) 0.32/L, first-order 1/(2πL)."""
+    Bartlett (sinc⁴) 0.32/L, first-order and Butterworth 1/(2πL) (their L is 1/(2π f₃))."""
     family, length_s, _ = spec
-    widths = {"moving_average": 0.443, "bartlett": 0.3195}
-    return widths.get(family, 1 / (2 * np.pi)) / length_s
+    pole = 1 / (2 * np.pi)
+    widths = {"moving_average": 0.443, "bartlett": 0.3195, "first_order": pole}
+    return (widths | dict.fromkeys(effects.BUTTERWORTH_ORDERS, pole))[family] / length_s
 
 
 def _holdout_column(ax: _Axis, state: _State, cand: effects.Candidate) -> dict:

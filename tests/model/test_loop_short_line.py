@@ -218,6 +218,7 @@ def test_a_butterworth_low_pass_is_modelled_as_its_family(order, fc, seed, lengt
     (found,) = res.accepted
     assert found.kind == "prefilter" and found.params["filter"] == f"butterworth{order}"
     assert found.params["length_s"] == pytest.approx(length, rel=1e-3)
+    assert found.evidence["bandwidth_3db_hz"] == pytest.approx(1 / (2 * np.pi * length), rel=1e-3)
     lo, hi = found.intervals["length_s"]
     assert lo < 1 / (2 * np.pi * fc) < hi < 1.03 * length
     assert res.terms_after.fit_tau_min_s == TAU0 and res.after.p_value > 0.5
