@@ -1138,34 +1138,25 @@ def terms_from_fit(
             lo, hi_profile = over_alternatives(
                 fit, alternatives, avar, edf, j, correlated, (lo, hi_profile)
             )
+        signed = ""  # Q's bound where the 1/τ² column fits best negative, 0 in its interval
+        if j == 0 and fit.short_sign < 0:
+            prefilter = float(3.0 * fit.coef[0])
+            if lo == 0:
+                signed = (
+                    f"; the term fits best negative, -{prefilter:.3g}/tau^2, with 0 in its 95 % "
+                    f"interval [0, {3 * hi_profile:.3g}], so no prefilter's correlation of "
+                    "neighbouring samples is resolved either"
+                )
+                hi_profile = _quantization_bound(fit, avar, edf, correlated)
         capped = caps[j] < hi_profile
         hi = min(hi_profile, caps[j])  # an unresolved term: at most what the curve allows
         if j == 0 and fit.short_sign < 0 and lo > 0:
-            prefilter = float(3.0 * fit.coef[0])
             reason = (
                 f"masked: the 1/tau^2 AVAR term is negative (-{prefilter:.3g}/tau^2, 95 % "
                 f"[{3 * lo:.3g}, {3 * hi:.3g}]), the signature of neighbouring samples "
                 "correlated by the sensor's prefilter; quantisation cannot be separated from it"
             )
             terms[name] = NoiseTerm(None, None, None, unit, reason)
-        elif j == 0 and fit.short_sign < 0:  # 0 in the negative term's interval: Q's bound
-            prefilter = float(3.0 * fit.coef[0])
-            bound = _quantization_bound(fit, avar, edf, correlated)
-            hi = min(bound, caps[0])
-            how = (
-                "its asymptote reaches the measured deviation's upper confidence bound"
-                if caps[0] < bound
-                else "profile likelihood over the 1/tau^2 term's sign"
-            )
-            reason = (
-                f"not resolved for {tau_lo:.4g} s <= tau <= {tau_hi:.4g} s: 95 % upper bound "
-                f"{np.sqrt(hi):.3g} {unit} ({how}; the term fits best negative, "
-                f"-{prefilter:.3g}/tau^2, with 0 in its 95 % interval [0, {3 * hi_profile:.3g}], "
-                "so no prefilter's correlation of neighbouring samples is resolved either)"
-            )
-            if misfit:
-                reason += f"; {misfit}"
-            terms[name] = NoiseTerm(None, None, float(np.sqrt(hi)), unit, reason)
         elif lo > 0:
             # a resolved term's interval: the profile's; B's is also held to a possible plateau
             # (others may lie above the curve where the negative prefilter term offsets them),
@@ -1180,11 +1171,11 @@ def terms_from_fit(
             how = (
                 "its asymptote reaches the measured deviation's upper confidence bound"
                 if capped
-                else "profile likelihood"
+                else "profile likelihood" + (" over the 1/tau^2 term's sign" if signed else "")
             )
             reason = (
                 f"not resolved for {tau_lo:.4g} s <= tau <= {tau_hi:.4g} s: 95 % upper bound "
-                f"{np.sqrt(hi):.3g} {unit} ({how})"
+                f"{np.sqrt(hi):.3g} {unit} ({how}{signed})"
             )
             if profiled is not fit and profiled.coef[j] > 0:  # the test held a fitted R at 0
                 fall, limit = rate_ramp_test(profiled, fit)
