@@ -673,6 +673,19 @@ def _best_option(
     return cand
 
 
+def profile_deviance(rss: np.ndarray | float, best: SpectralFit) -> np.ndarray:
+    """The profile deviance of fits whose whitened residual sums of squares are ``rss``
+    against the ``best`` fit: their excess over its residual sum in its residual variance,
+    (RSS − RSS_best)/s².  A best fit that leaves no residual (s² = 0: a series the whitener
+    turns into zeros, a constant record) makes every worse fit infinitely worse and an equal
+    one no worse (0), where the ratio is 0/0 (a fuzzed constant bag with one spike: a
+    RuntimeWarning, then NaN intervals)."""
+    excess = np.asarray(rss, dtype=float) - best.rss
+    if best.dispersion > 0:
+        return excess / best.dispersion
+    return np.where(excess > 0, np.inf, 0.0)
+
+
 def _profile_interval(fits: list[SpectralFit]) -> list[float]:
     """95 % profile interval of the coefficient of a one-column effect fitted at several values
     of its shape parameter (a lag, a warm-up's time constant).
@@ -688,7 +701,7 @@ def _profile_interval(fits: list[SpectralFit]) -> list[float]:
     1e-4 per 1 s block, 2 h, it held the truth on 13)."""
     rss = np.array([f.rss for f in fits])
     best = int(np.argmin(rss))
-    room = CHI2_95 - (rss - rss[best]) / fits[best].dispersion
+    room = CHI2_95 - profile_deviance(rss, fits[best])
     ok = np.flatnonzero(room >= 0)
     beta = np.array([fits[j].beta[0] for j in ok])
     half = np.sqrt(room[ok] * np.array([fits[j].cov[0, 0] for j in ok]))
@@ -880,17 +893,17 @@ class OptionFamily:
         best = fit_at(best_u)
 
         def room(v: float) -> float:  # χ²₁(0.95) − the profile deviance at e^v
-            return CHI2_95 - (fit_at(v).rss - best.rss) / best.dispersion
+            return CHI2_95 - float(profile_deviance(fit_at(v).rss, best))
 
         searched = np.append(u, best_u)
         order = np.argsort(searched)
-        rooms = CHI2_95 - (np.append(rss, best.rss) - best.rss) / best.dispersion
+        rooms = CHI2_95 - profile_deviance(np.append(rss, best.rss), best)
         interval = crossing_interval(searched[order], rooms[order], room)
         fits = [best, *fits_at(np.linspace(*np.log(interval), PROFILE_POINTS))]
         if zero is not None:
             fits.append(zero[2])
         intervals = {name: _profile_interval(fits), self.param: interval}
-        if zero is not None and (zero[2].rss - best.rss) / best.dispersion <= CHI2_95:
+        if zero is not None and profile_deviance(zero[2].rss, best) <= CHI2_95:
             interval[0] = 0.0
             return zero[0], dict(zero[1]), zero[2], intervals
         value = float(np.exp(best_u))

@@ -2393,6 +2393,8 @@ def _holdout_column(ax: _Axis, state: _State, cand: effects.Candidate) -> dict:
     a weak harmonic on a half fitted without its strong fundamental got no value: the real
     ADIS16405 accel_x, 1.696 Hz beside 0.565 Hz)."""
     halves = ax.half_curves(state)
+    if any(not np.any(a > 0) for _, a, _ in halves):  # a half that does not vary at all
+        return {"holds": False, "note": "a half of the record has no Allan variance to fit"}
     shape = _shape(cand.kind, ax.sig.tau0)
     specs = [cand.evidence["shape"]]
     if cand.kind != "narrowband":

@@ -159,7 +159,7 @@ def _acf_power(
     p = 0.0
     for d in range(dmax + 1):  # d: int64 from the start (one compiled _acf_pass)
         num, den, acc = _acf_pass(src, m, phase, count, line, d, acc / (count - d), w)
-        r1 = num / den
+        r1 = num / den if den > 0 else 0.0  # no variation left to correlate: white
         delta = r1 / (1.0 + r1)
         p = -2.0 * (delta + d)
         if delta < 0.25:
@@ -257,7 +257,10 @@ def b1_noise_id(x: np.ndarray, m: int) -> int:
     """
     ybar = np.diff(x[::m]) / m
     n = ybar.size
-    b1 = ybar.var(ddof=1) / (0.5 * np.mean(np.diff(ybar) ** 2))
+    avar = 0.5 * np.mean(np.diff(ybar) ** 2)
+    if avar == 0:  # averages that do not vary (a constant series): no type to read, white FM
+        return 0
+    b1 = ybar.var(ddof=1) / avar
     mu = -2
     for mu_hi in (-1, 0, 1):
         bound = np.sqrt(b1_theory(n, mu_hi - 1) * b1_theory(n, mu_hi))

@@ -112,3 +112,25 @@ def test_the_cases_that_crashed_are_analysed(tmp_path: Path, edits) -> None:
     odd_bag(path, 30 if not edits else 5000, 400.0, 1e-12 if edits else 1.0, 0.0, edits, 1)
     result = imupipe.analyze(path, tmp_path / "out", rrd=False, figures=False)
     assert list(result.axes) == ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
+
+
+@pytest.mark.parametrize(("n", "rate"), [(1000, 100.0), (5000, 10.0)])
+def test_a_constant_record_with_one_spike_and_two_streams_is_analysed(
+    tmp_path: Path, n: int, rate: float
+) -> None:
+    """1e-12 of noise on an offset of 1e6 is a constant record to float64; with one spike and
+    a second stream on the topic, its spike-corrected halves do not vary at all.  Until
+    session 47 the loop's hold-out divided by zero there (the noise identification's ACF and
+    B1, the gamma fit of a zero curve) and a warm-up's profile read 0/0 (found by the fuzz
+    above, outside its fixed examples)."""
+    path = tmp_path / "odd.mcap"
+    edits = [("spike", 0.0, 0.0, 0), ("two_streams", 0.0, 0.0, 0)]
+    odd_bag(path, n, rate, 1e-12, 1e6, edits, seed=n)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        result = imupipe.analyze(path, tmp_path / "out", rrd=False, figures=False)
+    assert list(result.axes) == ["gyro_x"]  # the other five are constant: not analysed
+    loop = result.axes["gyro_x"].loop
+    assert loop.accepted == []
+    notes = [c.evidence["holdout"].get("note") for c in loop.rejected if "holdout" in c.evidence]
+    assert "a half of the record has no Allan variance to fit" in notes

@@ -253,3 +253,15 @@ def test_quantisation_is_whitened_exactly_and_alone(masked: bool):
         cov = between @ means @ between.T
         whitened = whiten.inv_chol @ cov @ whiten.inv_chol.T
         assert np.abs(whitened - np.eye(len(whitened))).max() < tolerance
+
+
+def test_a_perfect_fit_makes_a_worse_one_infinitely_worse_and_an_equal_one_no_worse():
+    """The profile deviance (RSS − RSS_best)/s² when the best fit leaves no residual (s² = 0,
+    a whitened series of zeros): inf above it, 0 at it, never the 0/0 NaN that made a warm-up's
+    intervals NaN (with a RuntimeWarning) on a constant record with one spike."""
+    perfect = effects.SpectralFit(np.zeros(1), np.zeros((1, 1)), 0.0, 0.0, 0.0)
+    with np.errstate(all="raise"):
+        dev = effects.profile_deviance(np.array([0.0, 2.0, 0.0]), perfect)
+    assert dev.tolist() == [0.0, np.inf, 0.0]
+    noisy = effects.SpectralFit(np.zeros(1), np.zeros((1, 1)), 0.0, 2.0, 10.0)
+    assert effects.profile_deviance(np.array([10.0, 16.0]), noisy).tolist() == [0.0, 3.0]

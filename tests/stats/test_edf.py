@@ -237,3 +237,16 @@ def test_a_series_one_average_longer_than_the_window_is_read_from_its_start(
     p_window = edf._acf_power(np.diff(x[:4097]), 1, False, 4096, 2)
     assert abs(p_window % 1.0 - 0.5) > edf.ACF_WINDOW_MARGIN
     assert noise_ids(x, np.array([1]), window=True).tolist() == [int(np.rint(p_window))] == [0]
+
+
+def test_a_series_that_does_not_vary_reads_white_fm_at_every_factor():
+    """A constant rate (its phase a straight line: the half of a constant record a spike was
+    removed from) has no variation to correlate: both identifications read white FM (0)
+    instead of dividing by zero (the ACF's ZeroDivisionError, B1's 0/0 RuntimeWarning, found
+    by the odd-bag fuzz)."""
+    x = np.arange(2001) * 0.5  # phase of a constant rate of 0.5
+    assert edf.acf_noise_id(np.full(500, 3.25)) == 0
+    assert edf.b1_noise_id(x, 100) == 0
+    with np.errstate(all="raise"):
+        ids = edf.noise_ids(x, np.array([1, 2, 50, 100]))
+    assert ids.tolist() == [0, 0, 0, 0]

@@ -37,7 +37,7 @@ def _oracle_lag1_acf_about(z, mean):
         a = z[i] - mean
         num += a * (z[i + 1] - mean)
         den += a * a
-    return num / den
+    return num / den if den > 0 else 0.0  # no variation left (a 2-point series): white
 
 
 @numba.njit
@@ -83,7 +83,7 @@ def _oracle_averaged(x, m):
 
 
 def _outcome(f, *args):
-    """f(*args), or the exception type (r1 = 0/0 on 1- or 2-point series, in both versions)."""
+    """f(*args), or the exception type (a division by zero in both versions)."""
     try:
         return f(*args)
     except ZeroDivisionError as exc:
