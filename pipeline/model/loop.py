@@ -52,7 +52,7 @@ from __future__ import annotations
 import copy
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field, replace
-from functools import partial
+from functools import lru_cache, partial
 from typing import Literal, NamedTuple, TypeVar
 
 import numpy as np
@@ -72,6 +72,7 @@ SLOW_K_LEVEL = 0.68  # K of the slow effects' whitener: upper end of this profil
 WHITENERS_KEPT = 4  # per axis (:meth:`_Axis.whitener`; each ≤ 1024² floats, 8 MB)
 SPECTRA_KEPT = 32  # per axis (:meth:`_Axis.spectral`: spread-line fits, periodogram lines)
 WELCH_KEPT = 8  # per axis (:meth:`_Axis.welch`: Welch spectra by segment length)
+SHAPES_KEPT = 4096  # AVAR columns of effect shapes (:func:`_shape_column`; ~300 τ each, 2.4 kB)
 HANN_KEPT = 2  # per axis (:meth:`_Axis.hann`: the full-rate series' and the block means')
 N_BOOT = 200
 EFFECT_KINDS = (
@@ -746,8 +747,24 @@ def _apart(f: float, lines: list[float]) -> bool:
 
 def _shape(kind: str, tau0: float) -> Callable[[np.ndarray, tuple], np.ndarray]:
     """Column function (τ, shape parameters) → AVAR per unit squared value of a series
-    sampled every ``tau0`` s (:func:`ieee952.effect_shape`)."""
-    return lambda tau, spec: ieee952.effect_shape(kind, spec, tau0)(tau)
+    sampled every ``tau0`` s (:func:`ieee952.effect_shape`), read-only; each is computed once
+    (:func:`_shape_column`)."""
+    return lambda tau, spec: _shape_column(
+        kind, spec, tau0, np.ascontiguousarray(tau, dtype=float).tobytes()
+    )
+
+
+@lru_cache(maxsize=SHAPES_KEPT)
+def _shape_column(kind: str, spec: tuple, tau0: float, tau: bytes) -> np.ndarray:
+    """:func:`ieee952.effect_shape`'s column at the float64 τ (s) whose bytes are ``tau``,
+    read-only.  The loop asks for the same columns again and again — each round searches the
+    same grids, the profiles and hold-outs refit the best shapes, the six axes of a recording
+    share their τ — measured on a real ADIS16405 unit (1 M samples, 18 rounds over six axes):
+    10,754 columns asked for, 3,277 of them distinct, 1.2 s of CPU (the prefilter's 6,446,
+    0.9 s)."""
+    column = ieee952.effect_shape(kind, spec, tau0)(np.frombuffer(tau))
+    column.flags.writeable = False
+    return column
 
 
 def _column_name(kind: str, state: _State) -> str | None:

@@ -78,3 +78,27 @@ def test_accepted_spikes_give_the_allan_curve_of_the_corrected_series():
     expected = allan_curves(corrected, TAU0)[0]
     assert res.tau_s == pytest.approx(np.asarray(expected.tau_s), rel=1e-12)
     assert res.adev_after == pytest.approx(np.asarray(expected.adev), rel=1e-12)
+
+
+def test_a_shape_column_is_computed_once_and_is_the_one_of_its_own_tau_and_sample_interval(
+    monkeypatch,
+):
+    """The loop's effect columns are kept by kind, shape, τ0 and τ: asked again, the very same
+    read-only column, not computed again; another τ grid or another τ0 gets its own column
+    (a key that forgot either would hand a 100 Hz axis a 10 Hz axis' prefilter)."""
+    loop._shape_column.cache_clear()
+    calls = counting(monkeypatch, loop.ieee952, "effect_shape")
+    tau = np.geomspace(0.01, 100.0, 40)
+    spec = ("moving_average", 0.16, 0.01)
+    column = loop._shape("prefilter", 0.01)(tau, spec)
+    again = loop._shape("prefilter", 0.01)(tau.copy(), spec)
+    assert again is column and calls[0] == 1
+    assert not column.flags.writeable
+    np.testing.assert_array_equal(column, loop.ieee952.effect_shape("prefilter", spec, 0.01)(tau))
+    other_tau = loop._shape("prefilter", 0.01)(tau[::2], spec)
+    np.testing.assert_array_equal(other_tau, column[::2])
+    other_tau0 = loop._shape("prefilter", 0.005)(tau, spec)
+    assert calls[0] == 4
+    expected = loop.ieee952.effect_shape("prefilter", spec, 0.005)(tau)
+    np.testing.assert_array_equal(other_tau0, expected)
+    assert not np.array_equal(other_tau0, column)
