@@ -274,6 +274,23 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/report/test_rerun_view.py",
         "tests/report/test_rerun_streams.py",
     ),
+    # the figures' tests in process first; then the LocalCluster run whose PNGs' size is pinned
+    "pipeline/fleet/figures.py": (
+        "tests/fleet/test_fleet_population.py",
+        "tests/fleet/test_fleet_cluster.py::test_local_cluster_local_and_s3_units",
+    ),
+    # the in-process and one-worker tests first (seconds), then the real clusters (~2 min)
+    "pipeline/fleet/cluster.py": (
+        "tests/fleet/test_fleet_population.py::test_a_local_cluster_that_does_not_start_is_one_line",
+        "tests/fleet/test_fleet_population.py::test_bad_arguments_fail_before_any_worker_starts",
+        "tests/fleet/test_fleet_cluster.py::test_the_docs_give_deployments_the_embedded_clusters_settings",
+        "tests/fleet/test_fleet_cluster.py::test_embedded_workers_are_single_threaded",
+        "tests/fleet/test_fleet_cluster.py::test_embedded_workers_keep_glibc_malloc_trimming_and_run_no_profiler",
+        "tests/fleet/test_fleet_cluster.py::test_a_script_without_a_main_guard_fails_in_seconds_instead_of_hanging",
+        "tests/fleet/test_fleet_cluster.py::test_unreachable_scheduler_is_one_line_exit_2",
+        "tests/fleet/test_fleet_cluster.py::test_local_cluster_local_and_s3_units",
+        "tests/fleet/test_fleet_cluster.py::test_existing_scheduler_survives_a_killed_worker",
+    ),
 }
 
 
