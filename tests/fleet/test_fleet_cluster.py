@@ -282,6 +282,41 @@ def test_embedded_workers_are_single_threaded():
     assert threads == (1, 1, "1")
 
 
+def test_the_embedded_cluster_has_the_workers_asked_for_on_127_0_0_1_and_stops(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Without a scheduler: ``workers`` worker processes (not threads of this process), one
+    thread each, or one per core the process may use (``CPU_COUNT``, here pretended to be 1)
+    without it; the scheduler, the workers and the dashboard (a free port, not 8787) on
+    127.0.0.1 only (every socket listening in this process, which runs the scheduler and the
+    nannies, and in each worker); the cluster closed when the block ends."""
+    import imupipe.fleet.cluster as cluster
+
+    def listening() -> set[str]:  # local: pickled by value
+        import psutil
+
+        conns = psutil.Process().net_connections("inet")
+        return {c.laddr.ip for c in conns if c.status == psutil.CONN_LISTEN}
+
+    monkeypatch.setattr(cluster, "CPU_COUNT", 1)
+    for workers, expected in ((2, 2), (None, 1)):
+        with cluster.fleet_client(workers=workers) as client:
+            info = client.scheduler_info()
+            pids = client.run(os.getpid)
+            link = client.dashboard_link
+            local = client.cluster
+            here, there = listening(), client.run(listening)
+        assert info["address"].startswith("tcp://127.0.0.1:")
+        assert len(info["workers"]) == expected, workers
+        assert all(a.startswith("tcp://127.0.0.1:") for a in info["workers"])
+        assert [w["nthreads"] for w in info["workers"].values()] == [1] * expected
+        assert len(set(pids.values())) == expected and os.getpid() not in pids.values()
+        assert re.fullmatch(r"http://127\.0\.0\.1:(\d+)/status", link)
+        assert not link.endswith(":8787/status")
+        assert here == {"127.0.0.1"} and list(there.values()) == [{"127.0.0.1"}] * expected
+        assert local.status.name == "closed" and client.status == "closed"
+
+
 def test_embedded_workers_keep_glibc_malloc_trimming_and_run_no_profiler():
     """Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 and its workers sample every task's stack
     every 10 ms: 5.0 s instead of 3.6 s per 1 h unit.  The embedded cluster's workers have

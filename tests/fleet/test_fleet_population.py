@@ -3,10 +3,12 @@ the Markdown escaping of untrusted names."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 import polars as pl
@@ -15,7 +17,7 @@ import pytest
 from imupipe.analysis.analyze import AnalyzeOptions
 from imupipe.analysis.results import ALLAN_SCHEMA
 from imupipe.errors import DatasheetError, FleetError
-from imupipe.fleet.curves import fleet_frame, population_curves
+from imupipe.fleet.curves import UNIT_COLUMN, fleet_frame, population_curves
 from imupipe.fleet.discover import MAX_NAME, discover, unique_names
 from imupipe.fleet.population import (
     BOUNDED_ORDER_METHOD,
@@ -34,6 +36,9 @@ from imupipe.fleet.report import md_text
 from imupipe.fleet.task import budget_for_worker
 from imupipe.report.datasheet import Spec, load_datasheet, parse_datasheet
 from imupipe.units import RAD_PER_DEG
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -659,6 +664,274 @@ def test_a_strip_plot_shows_its_units_not_a_tolerance_interval_of_two(monkeypatc
     assert lo == pytest.approx(0.9e-5 * unit / 1.3) and hi == pytest.approx(2.2e-5 * unit * 1.3)
 
 
+def _curves(axes: tuple[str, ...], scales: dict[str, float]) -> pl.DataFrame:
+    """Fleet curves (``fleet_frame``) of one unit per ``scales`` entry: adev = scale / √τ times
+    1, 2, 3... on each of ``axes`` in turn (so that a panel holding another axis' curves shows),
+    in its sensor's unit."""
+    tau = np.array([0.1, 1.0, 10.0, 100.0])
+
+    def curve(scale: float) -> pl.DataFrame:
+        frames = []
+        for k, axis in enumerate(axes):
+            n, unit = len(tau), "m/s^2" if axis.startswith("accel") else "rad/s"
+            frames.append(
+                pl.DataFrame(
+                    {
+                        "axis": [axis] * n,
+                        "unit": [unit] * n,
+                        "tau": tau,
+                        "adev": (k + 1) * scale / np.sqrt(tau),
+                        "lo": np.nan,
+                        "hi": np.nan,
+                        "edf": 1.0,
+                        "terms": 1,
+                        "alpha": 0.0,
+                        "adev_after": np.nan,
+                        "model_before": np.nan,
+                        "model_after": np.nan,
+                        "z_before": np.nan,
+                        "z_after": np.nan,
+                    },
+                    schema=ALLAN_SCHEMA,
+                )
+            )
+        return pl.concat(frames)
+
+    return fleet_frame({name: curve(s) for name, s in scales.items()})
+
+
+def _drawn(monkeypatch: pytest.MonkeyPatch) -> list:
+    """The figures the fleet's figure functions draw (their PNG encoding replaced)."""
+    from imupipe.fleet import figures
+
+    drawn: list = []
+    monkeypatch.setattr(figures, "_png", lambda fig: drawn.append(fig) or b"png")
+    return drawn
+
+
+def test_the_adev_figure_draws_each_axis_units_over_the_population_band_and_median(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """fleet_adev_<sensor>.png: one 4.2 in panel per axis of the sensor present, in the fixed
+    margins; each holds that axis' units only (grey, 0.7 wide, 0.7 opaque) over its population's
+    95 % band and edges (blue, 0.25 opaque; 0.8 wide) and median (2.0 wide); the sensor's unit
+    on the first panel with the legend's three entries; no figure for a sensor without axes."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import to_hex
+
+    from imupipe.fleet import figures
+
+    drawn = _drawn(monkeypatch)
+    fleet = _curves(("accel_x", "gyro_x", "gyro_y"), {"a": 1.0, "b": 2.0, "c": 4.0})
+    pop = population_curves(fleet)
+    assert figures.adev_figure(fleet, pop, "gyro") == b"png"
+    gyro_only = fleet.filter(pl.col("axis") != "accel_x")
+    assert figures.adev_figure(gyro_only, pop, "accel") is None
+    (fig,) = drawn
+    assert tuple(fig.get_size_inches()) == pytest.approx((8.4, 4.2))
+    pars = fig.axes[0].get_gridspec().get_subplot_params(fig)
+    assert (pars.left, pars.right, pars.bottom, pars.top, pars.wspace) == (
+        0.07, 0.99, 0.12, 0.86, 0.28,
+    )  # fmt: skip
+    assert fig.get_suptitle() == "Gyroscopes: Allan deviation of 3 units"
+    assert [ax.get_title() for ax in fig.axes] == ["gyro_x", "gyro_y"]
+    for ax, axis in zip(fig.axes, ("gyro_x", "gyro_y"), strict=True):
+        assert (ax.get_xscale(), ax.get_yscale()) == ("log", "log")
+        assert ax.get_xlabel() == "averaging time τ [s]"
+        grid = [*ax.xaxis.get_gridlines(), *ax.yaxis.get_gridlines()]
+        assert {(g.get_linewidth(), g.get_alpha()) for g in grid} == {(0.4, 0.6)}
+        mine = fleet.filter(pl.col("axis") == axis)
+        (units,) = [c for c in ax.collections if isinstance(c, LineCollection)]
+        segments = units.get_segments()
+        assert len(segments) == 3
+        for seg, (_, unit) in zip(
+            segments, mine.group_by(UNIT_COLUMN, maintain_order=True), strict=True
+        ):
+            assert seg.tolist() == np.column_stack([unit["tau"], unit["adev"]]).tolist()
+        assert units.get_linewidth().tolist() == [0.7]
+        assert units.get_alpha() == pytest.approx(0.7)
+        assert units.get_edgecolor()[0][:3].tolist() == pytest.approx([0.45] * 3)
+        p = pop.filter(pl.col("axis") == axis)
+        (band,) = [c for c in ax.collections if c is not units and len(c.get_paths()) > 0]
+        ys = band.get_paths()[0].vertices[:, 1]
+        assert (ys.min(), ys.max()) == pytest.approx((p["lo"].min(), p["hi"].max()))
+        assert band.get_alpha() == 0.25 and to_hex(band.get_facecolor()[0]) == to_hex("tab:blue")
+        assert band.get_linewidth().tolist() == [0]  # no edge: the edges are the lines below
+        lines = [ln for ln in ax.lines if len(ln.get_xdata()) > 0]
+        assert [ln.get_ydata().tolist() for ln in lines] == [
+            p["lo"].to_list(),
+            p["hi"].to_list(),
+            p["median"].to_list(),
+        ]
+        assert [(ln.get_linewidth(), ln.get_zorder(), ln.get_color()) for ln in lines] == [
+            (0.8, 3, "tab:blue"), (0.8, 3, "tab:blue"), (2.0, 3, "tab:blue")
+        ]  # fmt: skip
+        lo, hi = ax.get_ylim()  # the view holds every unit's curve
+        assert lo <= mine["adev"].min() and hi >= mine["adev"].max()
+    assert [ax.get_ylabel() for ax in fig.axes] == ["Allan deviation σ(τ) [rad/s]", ""]
+    legend = fig.axes[0].get_legend()
+    assert [t.get_text() for t in legend.get_texts()] == [
+        "each unit", "population median", "95 % of units"
+    ]  # fmt: skip
+    assert fig.axes[1].get_legend() is None
+    assert {t.get_fontsize() for t in legend.get_texts()} == {7}
+    grey, median = legend.get_lines()
+    assert (grey.get_linewidth(), grey.get_color()) == (0.7, "0.45")
+    assert (median.get_linewidth(), median.get_color()) == (2.0, "tab:blue")
+    # a fleet of 60: each unit's curve fades to 0.7 × 30 / 60
+    figures.adev_figure(_curves(("gyro_z",), {f"u{k}": 1.0 + k for k in range(60)}), pop, "gyro")
+    (units,) = [c for c in drawn[1].axes[0].collections if isinstance(c, LineCollection)]
+    assert len(units.get_segments()) == 60 and units.get_alpha() == pytest.approx(0.35)
+    assert tuple(drawn[1].get_size_inches()) == pytest.approx((4.2, 4.2))
+
+
+def _strip_reports(names: dict[str, tuple[float | None, float | None, float | None]]) -> dict:
+    """report.json per unit: every term (value, lo, hi) on gyro_x and twice that on gyro_y."""
+    from imupipe.vocab import TERM_NAMES
+
+    def report(value: float | None, lo: float | None, hi: float | None) -> dict:
+        def twice(x: float | None) -> float | None:
+            return None if x is None else 2 * x
+
+        axes = {}
+        for axis, f in (("gyro_x", lambda x: x), ("gyro_y", twice)):
+            terms = {t: {"value": f(value), "lo": f(lo), "hi": f(hi), "unit": "u"}
+                     for t in TERM_NAMES}  # fmt: skip
+            axes[axis] = {"ieee952": terms}
+        return {"axes": axes}
+
+    return {name: report(*v) for name, v in names.items()}
+
+
+def _data(ax: Axes) -> dict[str, list[float]]:
+    """A strip panel's errorbars with data, per kind (colour): x, y, the bar's lower and upper
+    end of each point, in a row."""
+    out: dict[str, list[float]] = {}
+    for c in ax.containers:
+        line = c.lines[0]
+        if len(line.get_xdata()) == 0:
+            continue
+        (bars,) = c.lines[2]
+        ends = [(s[0][1], s[1][1]) for s in bars.get_segments()]
+        points = zip(line.get_xdata(), line.get_ydata(), ends, strict=True)
+        out[line.get_color()] = [float(v) for x, y, (lo, hi) in points for v in (x, y, lo, hi)]
+    return out
+
+
+def test_the_terms_figure_places_each_units_interval_bound_tolerance_and_datasheet(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """fleet_terms_<sensor>.png: three 4.2 in panels (N, B, K in the paper's units); per axis
+    (x = 0, 1), each unit at its own offset (−0.3, 0, +0.3 for three) with its 95 % interval
+    (black; an outlier orange, on top), an unresolved unit's upper bound (grey ▽), the tolerance
+    interval (blue, ±0.4) and the datasheet value (red dashes, ±0.45); their legend entries."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import to_hex
+
+    from imupipe.fleet import figures
+
+    drawn = _drawn(monkeypatch)
+    f = 180 / math.pi  # rad → °
+    reports = _strip_reports(
+        {"a": (1e-4, 0.9e-4, 1.2e-4), "b": (2e-4, None, None), "c": (None, None, 3e-4)}
+    )
+    stats = [
+        dataclasses.replace(
+            st, tolerance=(0.5e-4, 4e-4), outliers=("b",), datasheet=Spec(0.02, "°/√s")
+        )
+        if (st.axis, st.term) == ("gyro_x", "random_walk")
+        else st
+        for st in population(reports)
+    ]
+    assert figures.terms_figure(reports, stats, "gyro") == b"png"
+    assert figures.terms_figure(reports, stats, "accel") is None
+    (fig,) = drawn
+    assert tuple(fig.get_size_inches()) == pytest.approx((12.6, 4.2))
+    pars = fig.axes[0].get_gridspec().get_subplot_params(fig)
+    assert (pars.left, pars.right, pars.bottom, pars.top, pars.wspace) == (
+        0.07, 0.99, 0.12, 0.86, 0.28,
+    )  # fmt: skip
+    assert fig.get_suptitle() == "Gyroscopes: noise terms of 3 units"
+    assert [ax.get_title() for ax in fig.axes] == ["N [°/√s]", "B [°/s]", "K [°/s/√s]"]
+    for ax in fig.axes:
+        assert [t.get_text() for t in ax.get_xticklabels()] == ["gyro_x", "gyro_y"]
+        assert ax.get_xticks().tolist() == [0, 1]
+    n, b, _ = fig.axes
+    # N: "a" black on both axes, "b" an outlier on gyro_x only, with no interval
+    data = _data(n)
+    assert data.keys() == {"k", "tab:orange"}
+    assert data["k"] == pytest.approx([-0.3, 1e-4 * f, 0.9e-4 * f, 1.2e-4 * f,
+                                       0.7, 2e-4 * f, 1.8e-4 * f, 2.4e-4 * f,
+                                       1.0, 4e-4 * f, 4e-4 * f, 4e-4 * f])  # fmt: skip
+    assert data["tab:orange"] == pytest.approx([0.0, 2e-4 * f, 2e-4 * f, 2e-4 * f])
+    kinds = {
+        c.lines[0].get_color(): c.lines[0] for c in n.containers if len(c.lines[0].get_xdata())
+    }
+    # matplotlib draws an errorbar's points 0.1 above its zorder: the outliers (4) on top
+    assert [(kinds[k].get_alpha(), kinds[k].get_zorder()) for k in ("k", "tab:orange")] == [
+        (1.0, pytest.approx(2.1)), (1.0, pytest.approx(4.1))
+    ]  # fmt: skip
+    assert kinds["k"].get_marker() == "o" and kinds["k"].get_markersize() == 3.5
+    caps = next(c for c in n.containers if c.lines[0] is kinds["k"]).lines[1]
+    assert [cap.get_markersize() for cap in caps] == [4, 4]  # capsize 2 (points): 4 wide
+    (bound,) = [ln for ln in n.lines if ln.get_marker() == "v" and len(ln.get_xdata())]
+    assert bound.get_xydata().ravel().tolist() == pytest.approx([0.3, 3e-4 * f, 1.3, 6e-4 * f])
+    assert (bound.get_color(), bound.get_markersize(), bound.get_alpha()) == ("0.5", 4, 1.0)
+    # the tolerance interval of gyro_x: shaded and edged over ±0.4; the datasheet over ±0.45
+    bars = {k.lines[2][0] for k in n.containers}
+    edges = {
+        to_hex(c.get_color()[0]): c
+        for c in n.collections
+        if isinstance(c, LineCollection) and c not in bars and len(c.get_segments())
+    }
+    assert edges.keys() == {to_hex("tab:blue"), to_hex("tab:red")}
+    tolerance, sheet = edges[to_hex("tab:blue")], edges[to_hex("tab:red")]
+    assert np.ravel(tolerance.get_segments()).tolist() == pytest.approx(
+        [-0.4, 0.5e-4 * f, 0.4, 0.5e-4 * f, -0.4, 4e-4 * f, 0.4, 4e-4 * f]
+    )
+    assert (tolerance.get_linewidth().tolist(), tolerance.get_zorder()) == ([0.8], 3)
+    assert np.ravel(sheet.get_segments()).tolist() == pytest.approx([-0.45, 0.02, 0.45, 0.02])
+    assert sheet.get_linestyle()[0][1] is not None  # dashed
+    shaded = [c for c in n.collections if not isinstance(c, LineCollection)]
+    (band,) = [c for c in shaded if c.get_paths() and len(c.get_paths()[0].vertices)]
+    xs, ys = band.get_paths()[0].vertices.T
+    assert (xs.min(), xs.max(), ys.min(), ys.max()) == pytest.approx(
+        (-0.4, 0.4, 0.5e-4 * f, 4e-4 * f)
+    )
+    assert band.get_linewidth().tolist() == [0]
+    # B has neither, and no outlier: only its units, black
+    assert {to_hex(c.get_color()[0]) for c in b.collections if len(c.get_paths())} == {"#000000"}
+    legend = n.get_legend()
+    assert {t.get_fontsize() for t in legend.get_texts()} == {7}
+    assert sorted(t.get_text() for t in legend.get_texts()) == sorted([
+        "unit, 95 % interval", "outlier unit", "unresolved: upper bound",
+        "95 %/95 % tolerance", "datasheet",
+    ])  # fmt: skip
+    assert b.get_legend() is None
+
+
+def test_a_one_unit_terms_figure_draws_the_unit_on_its_axis(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A fleet of one unit: its point at each axis' tick (no offset), its interval as given;
+    the legend has no outlier or datasheet entry (there are none)."""
+    from imupipe.fleet import figures
+
+    drawn = _drawn(monkeypatch)
+    f = 180 / math.pi
+    reports = _strip_reports({"solo": (1e-4, 0.9e-4, 1.2e-4)})
+    figures.terms_figure(reports, population(reports), "gyro")
+    n = drawn[0].axes[0]
+    data = _data(n)
+    assert data.keys() == {"k"}
+    assert data["k"] == pytest.approx([0.0, 1e-4 * f, 0.9e-4 * f, 1.2e-4 * f,
+                                       1.0, 2e-4 * f, 1.8e-4 * f, 2.4e-4 * f])  # fmt: skip
+    assert drawn[0].get_suptitle() == "Gyroscopes: noise terms of 1 units"
+    assert [t.get_text() for t in n.get_legend().get_texts()] == [
+        "unresolved: upper bound", "95 %/95 % tolerance", "unit, 95 % interval"
+    ]  # fmt: skip
+
+
 def test_figure_jobs_carry_only_what_their_figure_draws():
     # a job with every report and curve was ~80 kB per unit: Dask warned of a 10 MB graph
     # at 120 units; the figures drawn from the slim jobs are the same PNGs
@@ -740,4 +1013,98 @@ def test_a_local_cluster_that_does_not_start_is_one_line(tmp_path, monkeypatch, 
         "imupipe: error: the local Dask cluster of 2 worker(s) did not start: Nanny failed to "
         "start in 60 seconds (is the machine overloaded? --workers fewer, or --scheduler an "
         "existing cluster)\n"
+    )
+
+
+class _SchedulerStandIn:
+    """A stand-in for ``distributed.Client`` of an existing scheduler: records how it was
+    reached and awaited; ``wait_for_workers`` times out above ``joined`` workers."""
+
+    calls: ClassVar[list[tuple]] = []
+    joined: ClassVar[int] = 2
+    refuse: ClassVar[Exception | None] = None
+
+    def __init__(self, address: str, timeout: str) -> None:
+        if self.refuse is not None:
+            raise self.refuse
+        self.calls.append(("connect", address, timeout))
+
+    def __enter__(self) -> _SchedulerStandIn:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.calls.append(("close",))
+
+    def wait_for_workers(self, n: int, timeout: str) -> None:
+        self.calls.append(("wait", n, timeout))
+        if n > self.joined:
+            raise TimeoutError("Only 2/3 workers arrived after 60.0s")
+
+
+def test_an_existing_scheduler_is_tried_for_10_s_and_its_workers_awaited_60_s(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``--scheduler`` (or DASK_SCHEDULER_ADDRESS when none is given): the client tries 10 s to
+    reach it; with ``--workers N`` it waits 60 s for N workers and fails in one line naming
+    them; without, it waits for none.  A refused or timed-out connection is one line too, and
+    ``--workers`` below 1 is refused before anything is reached."""
+    import dask.config
+
+    import imupipe.fleet.cluster as cluster
+
+    calls: list[tuple] = []
+    monkeypatch.setattr(_SchedulerStandIn, "calls", calls)
+    monkeypatch.setattr(cluster, "Client", _SchedulerStandIn)
+    address = "tcp://127.0.0.1:8786"
+    with cluster.fleet_client(address, 2) as client:
+        assert isinstance(client, _SchedulerStandIn)
+    assert calls == [("connect", address, "10.0s"), ("wait", 2, "60.0s"), ("close",)]
+    calls.clear()
+    with pytest.raises(FleetError) as err, cluster.fleet_client(address, 3):
+        pass
+    assert str(err.value) == f"{address}: fewer than 3 workers joined within 60 s"
+    assert calls == [("connect", address, "10.0s"), ("wait", 3, "60.0s"), ("close",)]
+    calls.clear()
+    with dask.config.set({"scheduler-address": "tcp://127.0.0.1:9999"}):
+        assert cluster.scheduler_address(address) == address  # the argument wins
+        with cluster.fleet_client():
+            pass
+    assert calls == [("connect", "tcp://127.0.0.1:9999", "10.0s"), ("close",)]
+    for refusal in (OSError("Connection refused"), TimeoutError("Timed out trying to connect")):
+        monkeypatch.setattr(_SchedulerStandIn, "refuse", refusal)
+        with pytest.raises(FleetError) as err, cluster.fleet_client(address):
+            pass
+        assert str(err.value) == f"cannot reach the Dask scheduler at {address}: {refusal}"
+    for workers in (0, -1):
+        with pytest.raises(FleetError) as err, cluster.fleet_client(address, workers):
+            pass
+        assert str(err.value) == f"--workers must be at least 1, not {workers}"
+
+
+@pytest.mark.parametrize(
+    ("error", "hint"),
+    [
+        (OSError("[Errno 98] Address already in use"), "is the machine overloaded? --workers "
+         "fewer, or --scheduler an existing cluster"),
+        (RuntimeError("Nanny failed to start."), 'from a script: is imupipe.analyze_fleet '
+         'called under `if __name__ == "__main__":`?'),
+    ],
+)  # fmt: skip
+def test_each_way_the_local_cluster_fails_to_start_is_one_fleet_error(
+    monkeypatch: pytest.MonkeyPatch, error: Exception, hint: str
+) -> None:
+    """A port taken (OSError) or a worker dying as it starts (RuntimeError; Dask's start-up
+    timeout: ``test_a_local_cluster_that_does_not_start_is_one_line``): one FleetError naming
+    the workers, Dask's reason and what to try."""
+    import imupipe.fleet.cluster as cluster
+
+    def failing(**kwargs: object) -> None:
+        raise error
+
+    monkeypatch.setattr(cluster, "LocalCluster", failing)
+    with pytest.raises(FleetError) as err, cluster.fleet_client(workers=3):
+        pass
+    reason = str(error) or type(error).__name__
+    assert str(err.value) == (
+        f"the local Dask cluster of 3 worker(s) did not start: {reason} ({hint})"
     )
