@@ -128,7 +128,7 @@ def _started(n: int) -> Iterator[LocalCluster]:
         )
         raise FleetError(
             f"the local Dask cluster of {n} worker(s) did not start: "
-            f"{exc or type(exc).__name__} ({hint})"
+            f"{str(exc) or type(exc).__name__} ({hint})"
         ) from exc
     with cluster:
         yield cluster

@@ -1088,6 +1088,9 @@ def test_an_existing_scheduler_is_tried_for_10_s_and_its_workers_awaited_60_s(
          "fewer, or --scheduler an existing cluster"),
         (RuntimeError("Nanny failed to start."), 'from a script: is imupipe.analyze_fleet '
          'called under `if __name__ == "__main__":`?'),
+        # a timeout without a message is named by its type, not an empty reason
+        (TimeoutError(), "is the machine overloaded? --workers fewer, or --scheduler an "
+         "existing cluster"),
     ],
 )  # fmt: skip
 def test_each_way_the_local_cluster_fails_to_start_is_one_fleet_error(
@@ -1104,7 +1107,7 @@ def test_each_way_the_local_cluster_fails_to_start_is_one_fleet_error(
     monkeypatch.setattr(cluster, "LocalCluster", failing)
     with pytest.raises(FleetError) as err, cluster.fleet_client(workers=3):
         pass
-    reason = str(error) or type(error).__name__
+    reason = str(error) or "TimeoutError"
     assert str(err.value) == (
         f"the local Dask cluster of 3 worker(s) did not start: {reason} ({hint})"
     )
