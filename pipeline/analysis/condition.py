@@ -603,7 +603,9 @@ def _envelope_places(t: np.ndarray, period: float) -> np.ndarray:
     # the period the stamps keep on the whole: the spans' median is off by up to a burst a span
     # for bursts whose length does not divide SPAN_ROWS (bursts of 7: 0.8 %, a 5 s gap of 1000
     # frames counted 1008)
-    period *= 1 + float(np.median(drift)) / w
+    scale = 1 + float(np.median(drift)) / w
+    if scale > 0:  # not where most blocks' stamps stand still (a frozen clock): no period
+        period *= scale
     drift = _drift(_block_levels(t, period))
     levels = _block_levels(t, period, drift)
     step = np.diff(levels) - _drift(levels)[:-1]

@@ -1339,7 +1339,8 @@ class HannSpectrum:
         return k * step, self.magnitude[k].astype(np.float64) ** 2
 
     def line(self, f_lo: float, f_hi: float) -> dict[str, float]:
-        """Strongest line in [f_lo, f_hi] (parabolic peak); empty below three bins.
+        """Strongest line in [f_lo, f_hi] (parabolic peak); empty below three bins or where the
+        band holds no power.
 
         Frequency 95 % interval from the Cramér–Rao bound for a real sinusoid in locally white
         noise, var(ω) = 24 σ² / (A² N (N² − 1)) (Rife & Boorstyn 1974), σ² from the band's
@@ -1358,6 +1359,8 @@ class HannSpectrum:
         first = max(int(band[0]) - 1, 0)
         spec = self.magnitude[first : int(band[-1]) + 2].astype(np.float64) ** 2
         band_power = spec[band - first]
+        if not band_power.max() > 0:  # a band without power (a constant stretch) has no line
+            return {}
         i = int(band[np.argmax(band_power)])
         i = min(max(i, 1), n // 2 - 1)
         a, b, c = np.log(spec[i - 1 - first : i + 2 - first] + 1e-300)

@@ -72,7 +72,7 @@ SLOW_K_LEVEL = 0.68  # K of the slow effects' whitener: upper end of this profil
 WHITENERS_KEPT = 4  # per axis (:meth:`_Axis.whitener`; each ≤ 1024² floats, 8 MB)
 SPECTRA_KEPT = 32  # per axis (:meth:`_Axis.spectral`: spread-line fits, periodogram lines)
 WELCH_KEPT = 8  # per axis (:meth:`_Axis.welch`: Welch spectra by segment length)
-SHAPES_KEPT = 4096  # AVAR columns of effect shapes (:func:`_shape_column`; ~300 τ each, 2.4 kB)
+SHAPES_KEPT = 4096  # effect columns (:func:`_shape_column`; with their τ keys ~9 MB on a real unit)
 HANN_KEPT = 2  # per axis (:meth:`_Axis.hann`: the full-rate series' and the block means')
 N_BOOT = 200
 EFFECT_KINDS = (
@@ -681,7 +681,9 @@ class _Axis:
 
     def half_curves(self, state: _State) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """(tau, avar, edf) of each half of the (spike-corrected) full-rate series, one half at
-        a time (views of the series: the only new full-rate array is one half's phase).
+        a time (views of the series: the only new full-rate array is one half's phase); a half
+        whose every sample is excluded has an Allan variance of 0 (:func:`_holdout_column`
+        does not judge on it).
 
         Computed once per axis with and once without the spike correction (there is only one,
         :meth:`spike_candidate`): every round's hold-out of every AVAR term reads the same
@@ -704,6 +706,9 @@ class _Axis:
         for start in (0, h):
             spikes = spikes_whole.within(start, start + h) if spikes_whole else None
             mask = None if excluded is None else excluded[start : start + h]
+            if mask is not None and mask.all():  # nothing left to measure: no Allan variance
+                out.append((m * self.sig.tau0, np.zeros(m.size), np.zeros(m.size)))
+                continue
             (c,) = allan_curves(
                 y[start : start + h], self.sig.tau0, m, correction=spikes, excluded=mask
             )

@@ -134,3 +134,31 @@ def test_a_constant_record_with_one_spike_and_two_streams_is_analysed(
     assert loop.accepted == []
     notes = [c.evidence["holdout"].get("note") for c in loop.rejected if "holdout" in c.evidence]
     assert "a half of the record has no Allan variance to fit" in notes
+
+
+FUZZED = {
+    # a NaN burst over 82 % of accel_z from its start: the second half of that axis is all
+    # excluded (the hold-out's Allan curve of it raised "every sample is excluded"); a band of
+    # zero spectrum under a constant block (a line's 0/0 frequency interval)
+    "nan_half": (100.0, 1e-3, -5.0, [("tone", 0.9002, 0.9180, 0), ("const_axis", 0.2511, 0.1675, 1),
+                 ("const_block", 0.5325, 0.6602, 1), ("nan_burst", 0.0127, 0.8201, 5)]),
+    # stamps repeated, frozen and reversed over most of the record: the envelope's period
+    # correction reached 0 (a division by zero placing the frames)
+    "frozen": (10.0, 1e-12, 1e6, [("dup_stamps", 0.6777, 0.6924, 2), ("frozen_clock", 0.1148,
+               0.0267, 1), ("tone", 0.5422, 0.1875, 4), ("reverse", 0.2156, 0.8778, 0)]),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", list(FUZZED))
+def test_the_bags_a_wider_fuzz_crashed_on_are_analysed(tmp_path: Path, case: str) -> None:
+    """Two of 300 bags of a wider scratch fuzz (session 47: up to five edits) ended in a
+    traceback; each is now analysed with no warning, the axes it can."""
+    rate, scale, offset, edits = FUZZED[case]
+    path = tmp_path / "odd.mcap"
+    odd_bag(path, 5000, rate, scale, offset, edits, seed=5000)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        result = imupipe.analyze(path, tmp_path / "out", rrd=False, figures=False)
+    expected = {"nan_half": ["gyro_x", "gyro_z", "accel_x", "accel_y", "accel_z"],
+                "frozen": ["accel_y"]}  # fmt: skip
+    assert list(result.axes) == expected[case]
