@@ -162,3 +162,23 @@ def test_the_bags_a_wider_fuzz_crashed_on_are_analysed(tmp_path: Path, case: str
     expected = {"nan_half": ["gyro_x", "gyro_z", "accel_x", "accel_y", "accel_z"],
                 "frozen": ["accel_y"]}  # fmt: skip
     assert list(result.axes) == expected[case]
+
+
+def test_stamps_that_stand_still_in_most_blocks_are_refused_in_one_line_not_placed_forever(
+    tmp_path: Path,
+) -> None:
+    """Stamps repeated and reversed over most of a 2 kHz record (and every axis quantised to
+    0): the stamp envelope's period correction came out 3e-16, its period 1e-19 s, and the
+    lost-frame placement iterated over ~3e8 levels (a scratch fuzz hung on it for 40 min in
+    session 47).  The correction now applies within a factor 2 only: the bag is read in
+    seconds and refused, its axes all zero."""
+    edits = [("quant", 0.8535, 0.5669, 3), ("dup_stamps", 0.3688, 0.8120, 4),
+             ("reverse", 0.7280, 0.9307, 4), ("quant", 0.6574, 0.1546, 3),
+             ("quant", 0.4998, 0.2883, 5)]  # fmt: skip
+    path = tmp_path / "odd.mcap"
+    odd_bag(path, 5000, 2000.0, 1e-3, 0.0, edits, seed=5000)
+    with pytest.raises(ImupipeError) as err:
+        imupipe.analyze(path, tmp_path / "out", rrd=False, figures=False)
+    message = str(err.value)
+    assert "\n" not in message
+    assert "no axis can be analysed: gyro_x is 0 in every sample over the segment" in message
