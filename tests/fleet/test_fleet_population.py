@@ -709,6 +709,12 @@ def _drawn(monkeypatch: pytest.MonkeyPatch) -> list:
     return drawn
 
 
+def _margins(fig) -> tuple[float, ...]:
+    """A fleet figure's subplot margins: (left, right, bottom, top, wspace) of its grid."""
+    pars = fig.axes[0].get_gridspec().get_subplot_params(fig)
+    return (pars.left, pars.right, pars.bottom, pars.top, pars.wspace)
+
+
 def test_the_adev_figure_draws_each_axis_units_over_the_population_band_and_median(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -729,10 +735,7 @@ def test_the_adev_figure_draws_each_axis_units_over_the_population_band_and_medi
     assert figures.adev_figure(gyro_only, pop, "accel") is None
     (fig,) = drawn
     assert tuple(fig.get_size_inches()) == pytest.approx((8.4, 4.2))
-    pars = fig.axes[0].get_gridspec().get_subplot_params(fig)
-    assert (pars.left, pars.right, pars.bottom, pars.top, pars.wspace) == (
-        0.07, 0.99, 0.12, 0.86, 0.28,
-    )  # fmt: skip
+    assert _margins(fig) == (0.07, 0.99, 0.12, 0.86, 0.28)
     assert fig.get_suptitle() == "Gyroscopes: Allan deviation of 3 units"
     assert [ax.get_title() for ax in fig.axes] == ["gyro_x", "gyro_y"]
     for ax, axis in zip(fig.axes, ("gyro_x", "gyro_y"), strict=True):
@@ -847,10 +850,7 @@ def test_the_terms_figure_places_each_units_interval_bound_tolerance_and_datashe
     assert figures.terms_figure(reports, stats, "accel") is None
     (fig,) = drawn
     assert tuple(fig.get_size_inches()) == pytest.approx((12.6, 4.2))
-    pars = fig.axes[0].get_gridspec().get_subplot_params(fig)
-    assert (pars.left, pars.right, pars.bottom, pars.top, pars.wspace) == (
-        0.07, 0.99, 0.12, 0.86, 0.28,
-    )  # fmt: skip
+    assert _margins(fig) == (0.07, 0.99, 0.12, 0.86, 0.28)
     assert fig.get_suptitle() == "Gyroscopes: noise terms of 3 units"
     assert [ax.get_title() for ax in fig.axes] == ["N [°/√s]", "B [°/s]", "K [°/s/√s]"]
     for ax in fig.axes:
