@@ -625,15 +625,11 @@ def _envelope_places(t: np.ndarray, period: float) -> np.ndarray:
         floor = np.lib.stride_tricks.sliding_window_view(ahead, BURST_ROWS).min(axis=1)
         base = float(np.median(floor[: w // 2])) if b > 0 else 0.0
         split = -1  # each lost frame where the floor passes its level (one gap: a burst apart)
-        # beyond the floor's top every level's row is the last: the rest of the frames go
-        # where the first of those levels put them (a long gap: millions of levels)
-        passed = min(lost, max(int(np.ceil(float(floor.max()) - base + 0.5)), 0) + 1)
-        for level in range(1, passed + 1):
+        for level in range(1, lost + 1):
             before = np.flatnonzero(floor < base + level - 0.5)
             row = int(before[-1]) + 1 if before.size else 0
             split = split if 0 <= split and row - split <= BURST_ROWS else row
             missing[lo + split] += 1
-        missing[lo + split] += lost - passed
     return np.arange(n, dtype=np.int64) + np.cumsum(missing[:n])
 
 
