@@ -358,9 +358,11 @@ class Whitener:
         solves with L (:meth:`whitened`), and that is all most of a loop's whiteners do."""
         if self._chol is None:
             return self._inv_chol
-        inv, info = linalg.lapack.dtrtri(self._chol, lower=1)
-        if info != 0:  # a zero pivot: potrf would have refused the matrix first
-            raise linalg.LinAlgError(f"triangular inverse failed (LAPACK dtrtri info {info})")
+        inv = np.array(self._chol, order="F")
+        n, info = ctypes.c_int(len(inv)), ctypes.c_int(0)
+        _DTRTRI(b"L", b"N", ctypes.byref(n), inv.ctypes.data, ctypes.byref(n), ctypes.byref(info))
+        if info.value != 0:  # a zero pivot: potrf would have refused the matrix first
+            raise linalg.LinAlgError(f"triangular inverse failed (LAPACK dtrtri {info.value})")
         return _read_only(inv)
 
     @property
@@ -376,7 +378,15 @@ class Whitener:
         blocks left out by forward substitution with L, O(m²) a column)."""
         if self._chol is None:
             return self._inv_chol @ d
-        return linalg.solve_triangular(self._chol, d, lower=True, check_finite=False)
+        x = np.array(d, dtype=float, order="F")  # (m,) or (m, k), overwritten with the solution
+        n, rhs = ctypes.byref(ctypes.c_int(len(x))), ctypes.c_int(x.size // max(len(x), 1))
+        info = ctypes.c_int(0)
+        if x.size:
+            a, b = self._chol.ctypes.data, x.ctypes.data
+            _DTRTRS(b"L", b"N", b"N", n, ctypes.byref(rhs), a, n, b, n, ctypes.byref(info))
+        if info.value != 0:  # a zero pivot: potrf would have refused the matrix first
+            raise linalg.LinAlgError(f"singular factor (LAPACK dtrtrs {info.value})")
+        return x
 
     def coarse(self, v: np.ndarray) -> np.ndarray:
         """Coarse block means of ``v`` (n,) or (n, k) (an incomplete last block is dropped)."""
@@ -389,13 +399,26 @@ class Whitener:
 
 
 _INT = ctypes.POINTER(ctypes.c_int)
-_DPOTRF = ctypes.CFUNCTYPE(None, ctypes.c_char_p, _INT, ctypes.c_void_p, _INT, _INT)(
-    get_cython_function_address("scipy.linalg.cython_lapack", "dpotrf")
-)
-"""LAPACK dpotrf, scipy's own (``scipy.linalg.cython_lapack``), called by ctypes: a foreign
-call that releases the GIL, where ``scipy.linalg.cholesky`` holds it for the whole
-factorisation (py-spy on a real ADIS16405 unit: 2.5 s of the two axis threads' loops held the
-GIL in it, each whitener's 13 ms keeping the other thread's Python waiting)."""
+_CHAR = ctypes.c_char_p
+_PTR = ctypes.c_void_p
+
+
+def _lapack(name: str, *argtypes: type) -> Callable[..., None]:
+    """LAPACK routine ``name``, scipy's own (``scipy.linalg.cython_lapack``: the library
+    ``scipy.linalg`` calls), called by ctypes: a foreign call that releases the GIL, where
+    scipy's wrappers (``cholesky``, ``solve_triangular``, ``lapack.dtrtri``) hold it for the
+    whole routine.  py-spy on a real ADIS16405 unit: 2.5 s of the two axis threads' loops held
+    the GIL in the Cholesky factorisations, each whitener's 13 ms keeping the other thread's
+    Python waiting; then (session 48, ``--gil``) 1.8 s in the triangular solves and 0.7 s in
+    the inverses.  Same routine, same arguments: the same bits
+    (``tests/model/test_whitener.py``)."""
+    address = get_cython_function_address("scipy.linalg.cython_lapack", name)
+    return ctypes.CFUNCTYPE(None, *argtypes)(address)
+
+
+_DPOTRF = _lapack("dpotrf", _CHAR, _INT, _PTR, _INT, _INT)
+_DTRTRS = _lapack("dtrtrs", _CHAR, _CHAR, _CHAR, _INT, _INT, _PTR, _INT, _PTR, _INT, _INT)
+_DTRTRI = _lapack("dtrtri", _CHAR, _CHAR, _INT, _PTR, _INT, _INT)
 
 
 def _cholesky(cov: np.ndarray) -> np.ndarray:
