@@ -409,8 +409,8 @@ def _lapack(name: str, *argtypes: type) -> Callable[..., None]:
     scipy's wrappers (``cholesky``, ``solve_triangular``, ``lapack.dtrtri``) hold it for the
     whole routine.  py-spy on a real ADIS16405 unit: 2.5 s of the two axis threads' loops held
     the GIL in the Cholesky factorisations, each whitener's 13 ms keeping the other thread's
-    Python waiting; then (session 48, ``--gil``) 1.8 s in the triangular solves and 0.7 s in
-    the inverses.  Same routine, same arguments: the same bits
+    Python waiting; then (session 48, ``py-spy --gil``, per analysis) 1.2 s in the triangular
+    solves and 0.3 s in the inverses.  Same routine, same arguments: the same bits
     (``tests/model/test_whitener.py``)."""
     address = get_cython_function_address("scipy.linalg.cython_lapack", name)
     return ctypes.CFUNCTYPE(None, *argtypes)(address)

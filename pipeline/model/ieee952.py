@@ -104,7 +104,7 @@ def _fit_points(
     """(:func:`fit_index`, :func:`evidence_weights`, :func:`design_columns`) of the float64
     buffer ``tau_key`` from index ``first`` (read-only): computed once per τ grid and fit start,
     reused by every :func:`fit_composite` on them (a real ADIS16405 unit's loops fit 11,141
-    times on a few dozen; their Python loop, sort and column stacking held the GIL ~2 s)."""
+    times on a few dozen; their Python loop, sort and column stacking held the GIL ~0.8 s)."""
     tau = np.frombuffer(tau_key)
     idx = fit_index(tau, first, dense_from)
     points = (idx, evidence_weights(tau, idx, dense_from), design_columns(tau))

@@ -122,8 +122,8 @@ def test_the_masked_covariance_is_factorised_as_scipy_does_without_holding_the_g
 
 def test_the_masked_solve_and_inverse_are_scipys_without_holding_the_gil():
     """Whitening with L and forming L⁻¹ call LAPACK dtrtrs and dtrtri through ctypes too
-    (scipy's ``solve_triangular`` and ``lapack.dtrtri`` hold the GIL: 2.5 s of a real unit's
-    loops, session 48): the same bits as scipy's for one column and several, the caller's
+    (scipy's ``solve_triangular`` and ``lapack.dtrtri`` hold the GIL: 1.5 s of an analysis of
+    a real unit, session 48): the same bits as scipy's for one column and several, the caller's
     array left as it was; a zero pivot is refused."""
     whiten = effects.Whitener(effects.NoisePsd(N2, 0.0, np.inf, K2), N_D, DT, _gapped())
     m = len(whiten.blocks) - 1
