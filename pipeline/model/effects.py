@@ -401,6 +401,7 @@ class Whitener:
 _INT = ctypes.POINTER(ctypes.c_int)
 _CHAR = ctypes.c_char_p
 _PTR = ctypes.c_void_p
+_DOUBLE = ctypes.POINTER(ctypes.c_double)
 
 
 def _lapack(name: str, *argtypes: type) -> Callable[..., None]:
@@ -419,6 +420,7 @@ def _lapack(name: str, *argtypes: type) -> Callable[..., None]:
 _DPOTRF = _lapack("dpotrf", _CHAR, _INT, _PTR, _INT, _INT)
 _DTRTRS = _lapack("dtrtrs", _CHAR, _CHAR, _CHAR, _INT, _INT, _PTR, _INT, _PTR, _INT, _INT)
 _DTRTRI = _lapack("dtrtri", _CHAR, _CHAR, _INT, _PTR, _INT, _INT)
+_DLASET = _lapack("dlaset", _CHAR, _INT, _INT, _DOUBLE, _DOUBLE, _PTR, _INT)
 
 
 def _cholesky(cov: np.ndarray) -> np.ndarray:
@@ -431,8 +433,12 @@ def _cholesky(cov: np.ndarray) -> np.ndarray:
     _DPOTRF(b"L", ctypes.byref(n), cov.ctypes.data, ctypes.byref(n), ctypes.byref(info))
     if info.value != 0:
         raise linalg.LinAlgError(f"covariance not positive definite (LAPACK dpotrf {info.value})")
-    for i in range(1, len(cov)):  # the C view holds Lᵀ: its lower triangle is cov's still
-        cov[i, :i] = 0.0
+    if len(cov) > 1:  # the C view holds Lᵀ, its lower triangle cov's still: Fortran's upper
+        # triangle, i.e. the upper triangle and diagonal of the block from column 2, set to 0
+        zero, rest = ctypes.c_double(0.0), ctypes.c_int(len(cov) - 1)
+        first_above = cov.ctypes.data + cov.itemsize * len(cov)
+        _DLASET(b"U", ctypes.byref(rest), ctypes.byref(rest), ctypes.byref(zero),
+                ctypes.byref(zero), first_above, ctypes.byref(n))  # fmt: skip
     return cov.T
 
 

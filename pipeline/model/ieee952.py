@@ -460,9 +460,10 @@ def fit_nonneg_gamma(
     # writable C-contiguous copies (tiny): the arrays' types of _fit_designs' call, so that
     # _fit_gamma compiles once whoever calls it
     design, avar, edf = (np.array(a, dtype=float, order="C") for a in (design, avar, edf))
-    offset = np.array(np.broadcast_to(np.asarray(offset, dtype=float), avar.shape))
+    offset_at = np.empty(avar.shape)
+    offset_at[...] = offset  # a scalar or per-τ offset, broadcast into its own array
     start = np.zeros(design.shape[1]) if start is None else np.array(start, dtype=float)
-    coef, dev = _fit_gamma(design, avar, edf, offset, start)
+    coef, dev = _fit_gamma(design, avar, edf, offset_at, start)
     return coef, float(dev)
 
 
