@@ -113,6 +113,31 @@ def _fit_points(
     return points
 
 
+@functools.lru_cache(maxsize=256)
+def _profile_designs(
+    tau_key: bytes, first: int, dense_from: float, cutoff_key: bytes, signs: tuple[int, ...]
+) -> np.ndarray:
+    """The IEEE 952 columns at the fitted τ (:func:`_fit_points`) for every (sign of the 3/τ²
+    column, flicker cut-off) of :func:`fit_composite`'s profile, signs outer: (n_sign ·
+    n_cutoff, n_fit, 5), read-only; each fit adds its own extra columns to a copy."""
+    idx, _, columns = _fit_points(tau_key, first, dense_from)
+    flicker = _flicker_table(tau_key, cutoff_key)
+    n_cutoff = flicker.shape[1]
+    designs = np.repeat(columns[idx][None], len(signs) * n_cutoff, axis=0)
+    designs[:, :, 0] *= np.repeat(signs, n_cutoff)[:, None]
+    designs[:, :, 2] = np.tile(flicker[idx].T, (len(signs), 1))
+    designs.flags.writeable = False
+    return designs
+
+
+@functools.lru_cache(maxsize=256)
+def _cutoff_grid(tau_key: bytes) -> np.ndarray:
+    """:func:`cutoff_grid` of the float64 buffer ``tau_key``, read-only."""
+    grid = cutoff_grid(np.frombuffer(tau_key))
+    grid.flags.writeable = False
+    return grid
+
+
 def design_columns(tau: np.ndarray, cutoff_hz: float = np.inf) -> np.ndarray:
     """Columns (n_tau, 5) of the AVAR model per unit squared coefficient (Q², N², B², K², R²)."""
     tau = np.asarray(tau, dtype=float)
@@ -782,16 +807,19 @@ def fit_composite(
     extra = extra or {}
     tau = np.ascontiguousarray(tau, dtype=float)
     first = int(np.searchsorted(tau, tau_min * (1 - 1e-9)))
-    idx, weight, columns = _fit_points(tau.tobytes(), first, float(dense_from))
+    tau_key = tau.tobytes()
+    idx, weight, columns = _fit_points(tau_key, first, float(dense_from))
     names = TERM_NAMES + tuple(extra)
-    grid = cutoff_grid(tau) if cutoff_hz is None else np.array([cutoff_hz], dtype=float)
-    flicker = _flicker_table(tau.tobytes(), grid.tobytes())
+    grid = _cutoff_grid(tau_key) if cutoff_hz is None else np.array([cutoff_hz], dtype=float)
+    flicker = _flicker_table(tau_key, grid.tobytes())
     base = np.column_stack([columns, *extra.values()])
     base[:, 4] *= rate_ramp
     signs = (1, -1) if prefilter else (1,)
-    designs = np.repeat(base[idx][None], len(signs) * len(grid), axis=0)
-    designs[:, :, 0] *= np.repeat(signs, len(grid))[:, None]
-    designs[:, :, 2] = np.tile(flicker[idx].T, (len(signs), 1))
+    profiled = _profile_designs(tau_key, first, float(dense_from), grid.tobytes(), signs)
+    designs = np.empty((*profiled.shape[:2], base.shape[1]))
+    designs[:, :, :5] = profiled
+    designs[:, :, 4] *= rate_ramp
+    designs[:, :, 5:] = base[idx, 5:]
     a = np.ascontiguousarray(avar[idx], dtype=float)
     coefs, devs = _fit_designs(designs, a, np.ascontiguousarray(edf[idx] * weight, dtype=float))
 
@@ -808,7 +836,8 @@ def fit_composite(
         )
 
     def lowest(ks: np.ndarray) -> int:  # the first of the least deviances (to 1e-9)
-        return int(ks[np.flatnonzero(devs[ks] < devs[ks].min() + 1e-9)[0]])
+        among = devs[ks]
+        return int(ks[np.flatnonzero(among < among.min() + 1e-9)[0]])
 
     best = composite(lowest(np.arange(len(devs))))
     possible = np.flatnonzero(coefs[:, 2] <= flicker_max)
