@@ -394,3 +394,37 @@ def test_b_limit_binds_only_a_rejected_fit():
     held = ieee952.fit_composite(tau, hump, edf, flicker_max=limit)
     assert held.p_value < ieee952.ADEQUATE_P
     assert held.coef[2] <= limit
+
+
+def test_each_fit_reads_the_points_and_designs_of_its_own_start_tail_and_signs():
+    """fit_composite keeps its τ points, weights and profile designs per τ grid, fit start,
+    dense tail and signs (:func:`ieee952._fit_points`, ``_profile_designs``): fits of one curve
+    with other starts, tails, signs and an extra column, in a row, equal the same fits with
+    nothing kept, and what is kept cannot be written."""
+    tau = np.geomspace(0.01, 4000.0, 55)
+    avar = ieee952.avar_model(tau, 2e-4, 3e-3, 2e-4, 4e-5) * np.exp(
+        0.05 * np.random.default_rng(11).standard_normal(tau.size)
+    )
+    edf = np.maximum(4.0e5 / np.maximum(tau / 0.01, 1.0), 1.0)
+    line = np.exp(-((np.log(tau / 2.0)) ** 2))
+    calls = [
+        {},
+        {"tau_min": 0.1},
+        {"tau_min": 0.1, "dense_from": 500.0},
+        {"tau_min": 0.1, "dense_from": 500.0, "prefilter": True},
+        {"dense_from": 500.0, "rate_ramp": False},
+        {"extra": {"line": line}, "prefilter": True},
+        {"cutoff_hz": 0.05},
+    ]
+    kept = [ieee952.fit_composite(tau, avar, edf, **kw) for kw in calls]
+    for cache in (ieee952._fit_points, ieee952._profile_designs, ieee952._cutoff_grid):
+        cache.cache_clear()
+    for kw, fit in zip(calls, kept, strict=True):
+        fresh = ieee952.fit_composite(tau, avar, edf, **kw)
+        assert np.array_equal(fit.fit_index, fresh.fit_index)
+        assert np.array_equal(fit.coef, fresh.coef) and fit.deviance == fresh.deviance
+        assert (fit.cutoff_hz, fit.short_sign) == (fresh.cutoff_hz, fresh.short_sign)
+    # four point sets: from 0.01 or 0.1 s, with or without every τ of the tail
+    assert len({tuple(f.fit_index) for f in kept}) == 4
+    assert kept[3].deviance <= kept[2].deviance  # both signs tried: never a worse fit
+    assert not kept[0].fit_index.flags.writeable and not kept[0].weight.flags.writeable
