@@ -136,6 +136,61 @@ def test_file_cut_mid_chunk_keeps_complete_chunks(tmp_path: Path) -> None:
     assert any("ends mid-record" in w for w in warnings)
 
 
+def test_a_file_cut_inside_a_record_says_which_record_and_how_many_bytes_were_lost(
+    tmp_path: Path,
+) -> None:
+    """A file cut by the end of the disk keeps every record before the cut, and its warning
+    names the record cut (its header, a Message, a Chunk) and the bytes lost, with their share
+    of the file; a cut chunk is reported lost with its time range and estimated messages when
+    its fixed fields (start, end, size: 24 bytes) survive, as unknown when they do not."""
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    no_footer = (
+        "file has no footer/summary (the writer stopped before finishing): every complete "
+        "chunk was read by a linear scan"
+    )
+
+    def cut_at(path: Path, at: int) -> tuple[int, list[str]]:
+        path.write_bytes(whole[:at])
+        rec = decode(path)
+        return rec.frames.height, list(rec.warnings)
+
+    def mid_record(kind: str, lost: int, file_bytes: int) -> str:
+        return (
+            f"file ends mid-record (inside {kind}): the last {lost} bytes "
+            f"({100 * lost / file_bytes:.2f} % of the file) could not be read"
+        )
+
+    messages = hm.imu_message_records(1, 5)  # unchunked, after the IMU chunk of 3000
+    path = hm.imu_file(tmp_path / "m.mcap", extra=(messages,))
+    whole = path.read_bytes()
+    third = whole.index(messages) + 2 * len(messages) // 5
+    assert cut_at(path, third + 1) == (
+        3002,
+        [mid_record("a record header", 1, third + 1), no_footer],
+    )
+    assert cut_at(path, third + 30) == (
+        3002,
+        [mid_record("a message record", 30, third + 30), no_footer],
+    )
+
+    span = (hm.T0_NS + 30 * 10**9, hm.T0_NS + 30_390_000_000)  # 40 messages at 100 Hz
+    chunk = hm.chunk(hm.imu_message_records(1, 40), "", start_ns=span[0], end_ns=span[1])
+    path = hm.imu_file(tmp_path / "c.mcap", extra=(chunk,))
+    whole = path.read_bytes()
+    body = whole.index(chunk) + 9
+    cut = "a chunk was lost (cut off by the end of the file)"
+    known = f"{cut}: about 40 messages whose log times span 0.390 s"
+    for at, lost in ((body + 23, f"{cut}; its size and time range are unknown"),
+                     (body + 24, known),
+                     (body + len(chunk) - 10, known)):  # fmt: skip
+        assert cut_at(path, at) == (
+            3000,
+            [lost, mid_record("a chunk record", at - (body - 9), at), no_footer],
+        )
+
+
 def test_bad_crc_chunk_is_skipped_and_reported(tmp_path: Path) -> None:
     path = tmp_path / "crc.mcap"
     write_file(path, [make_block(100, i * 100) for i in range(3)], compression="")
@@ -202,6 +257,27 @@ def test_a_malformed_message_outside_chunks_is_skipped_and_the_next_ones_read(
     assert list(rec.warnings) == ["skipped 1 unreadable message record(s)"]
 
 
+def test_a_chunk_with_as_many_malformed_as_good_messages_reads_the_good_and_counts_the_rest(
+    tmp_path: Path,
+) -> None:
+    """A chunk whose IMU messages are half well-formed, half cut short (2 and 2): the two good
+    ones are decoded and the two others counted in the malformed warning."""
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    good = hm.imu_message_records(1, 4)
+    one = len(good) // 4
+    records = [good[k * one : (k + 1) * one] for k in range(4)]
+    for k in (1, 3):  # the payload's last 8 bytes dropped, the record's length with them
+        body = records[k][9:-8]
+        records[k] = hm.record(0x05, body)
+    rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=(hm.chunk(b"".join(records)),)))
+    assert rec.frames.height == 3002
+    assert list(rec.warnings) == [
+        "/imu/data: 2 malformed messages (size does not match the schema) skipped"
+    ]
+
+
 def _channel_record(channel_id: int, topic: str) -> bytes:
     """A well-formed Channel record (MCAP spec: id u16, schema_id u16, topic, encoding, an
     empty metadata map)."""
@@ -213,6 +289,41 @@ def _channel_record(channel_id: int, topic: str) -> bytes:
 
     text = b"".join(struct.pack("<I", len(s)) + s for s in (topic.encode(), b"cdr"))
     return hm.record(Opcode.CHANNEL, struct.pack("<HH", channel_id, 1) + text + b"\0\0\0\0")
+
+
+def test_a_topics_frame_id_is_that_of_its_first_well_formed_message(tmp_path: Path) -> None:
+    """An Imu topic whose first chunk holds only malformed messages (cut short, their
+    frame_id "bad_link" intact) takes its frame_id from the first well-formed message, in the
+    next chunk; the malformed ones are counted."""
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+    from imupipe.testing.ros_cdr import imu_payloads
+
+    log = hm.T0_NS + np.arange(3000, 3002) * 10_000_000
+    bad = imu_payloads(log, np.zeros((2, 3)), np.zeros((2, 3)), frame_id="bad_link")[:, :-8]
+    cut = b"".join(hm.message(2, int(t), p.tobytes()) for t, p in zip(log, bad, strict=True))
+    good = hm.imu_message_records(2, 5, first=3002)
+    extra = (_channel_record(2, "/imu/b"), hm.chunk(cut), hm.chunk(good))
+    rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=extra), topic="/imu/b")
+    assert rec.frames.height == 5 and rec.frame_ids == ("imu",)
+    assert list(rec.warnings) == [
+        "/imu/b: 2 malformed messages (size does not match the schema) skipped"
+    ]
+
+
+def test_the_highest_channel_id_65535_is_listed_and_decoded(tmp_path: Path) -> None:
+    """Channel ids are u16 (MCAP spec): a channel 65535 declared after the first IMU topic is
+    counted by ``imupipe info`` and decoded like channel 1."""
+    from imupipe.io.decode import decode
+    from imupipe.io.info import describe
+    from imupipe.testing import hostile_mcap as hm
+
+    extra = (_channel_record(65535, "/imu/far"), hm.chunk(hm.imu_message_records(65535, 7)))
+    path = hm.imu_file(tmp_path / "x.mcap", extra=extra)
+    counts = {t.topic: t.messages for t in describe(path).topics}
+    assert counts == {"/imu/data": 3000, "/imu/far": 7}
+    rec = decode(path, topic="/imu/far")
+    assert rec.frames.height == 7 and list(rec.warnings) == []
 
 
 def test_a_chunk_may_end_with_a_channel_record(tmp_path: Path) -> None:
@@ -264,6 +375,28 @@ def test_a_chunk_inside_a_chunk_between_messages_is_counted_and_the_walk_goes_on
     rec = decode(hm.imu_file(tmp_path / "y.mcap", extra=(hm.chunk(records),)))
     assert rec.frames.height == 3012
     assert list(rec.warnings) == []
+
+
+def test_a_header_or_footer_record_inside_a_chunk_is_skipped_not_taken_for_a_nested_chunk(
+    tmp_path: Path,
+) -> None:
+    """A chunk holds Schema, Channel and Message records (MCAP spec); a Header or a Footer
+    record among its messages (opcodes 0x01, 0x02: below Chunk's 0x06) is skipped like any
+    record a chunk may not hold, without a warning, and the messages after it are read."""
+    import struct
+
+    from mcap.records import Opcode
+
+    from imupipe.io.decode import decode
+    from imupipe.testing import hostile_mcap as hm
+
+    header = hm.record(Opcode.HEADER, struct.pack("<I", 4) + b"ros2" + struct.pack("<I", 0))
+    footer = hm.record(Opcode.FOOTER, bytes(8 + 8 + 4))
+    for stray in (header, footer):
+        records = hm.imu_message_records(1, 5) + stray + hm.imu_message_records(1, 7, first=3005)
+        rec = decode(hm.imu_file(tmp_path / "x.mcap", extra=(hm.chunk(records),)))
+        assert rec.frames.height == 3012
+        assert list(rec.warnings) == []
 
 
 def test_a_tiny_memory_budget_still_reads_chunks_up_to_64_mib(tmp_path: Path) -> None:
