@@ -90,3 +90,43 @@ def test_frame_ids_of_every_length_byte_and_a_foreign_header_among_good_messages
     np.testing.assert_array_equal(rows.log_time[0], [10, 11, 12, 13])
     celsius = rows.rows[0][:, 16:24].copy().view("<f8")[:, 0]
     assert celsius.tolist() == [0.25, 1.25, 2.25, 3.25]
+
+
+def _string(text: str) -> bytes:
+    return struct.pack("<I", len(text)) + text.encode()
+
+
+def test_a_channel_declared_again_after_a_chunk_was_read_ahead_reads_that_chunk_anew(
+    tmp_path,
+) -> None:
+    """A channel declared with the Temperature layout, then again as a topic that is not read,
+    just before a chunk of its messages: the chunk was read ahead (its rows made) while the
+    first declaration held, and its messages are skipped all the same when it is reached; the
+    chunk before the new declaration is read whole."""
+    from imupipe.io.mcap_scan import MAGIC, McapScanner
+    from imupipe.testing import hostile_mcap as hm
+
+    def channel(topic: str) -> bytes:  # id 1, schema 0 (none), cdr, no metadata
+        body = struct.pack("<HH", 1, 0) + _string(topic) + _string("cdr") + bytes(4)
+        return hm.record(0x04, body)
+
+    def chunk_of(celsius: list[float], first_ns: int) -> bytes:
+        payloads = temperatures(celsius, "imu")
+        return hm.chunk(b"".join(message(1, first_ns + k, p) for k, p in enumerate(payloads)))
+
+    # 3 Metadata records: the redeclaration is parsed only after the chunk following it was
+    # read ahead (4 records ahead), and the first declaration before that chunk was
+    pad = [hm.record(0x0C, _string(f"pad{k}") + bytes(4)) for k in range(3)]
+    records = [channel("/t"), chunk_of([20.5, 21.5], 100), *pad, channel("/x")]
+    records.append(chunk_of([30.5, 31.5, 32.5], 200))
+    path = tmp_path / "redeclared.mcap"
+    path.write_bytes(MAGIC + b"".join(records))
+
+    def layout(channel, schema) -> CdrLayout | None:
+        return TEMPERATURE if channel.topic == "/t" else None
+
+    scanner = McapScanner(path)
+    read = [(b.log_time.tolist(), b.rows[:, 16:24].copy().view("<f8")[:, 0].tolist())
+            for b in scanner.cdr_batches(layout)]  # fmt: skip
+    assert read == [([100, 101], [20.5, 21.5])]
+    assert scanner.report.chunks == 2 and scanner.report.read_counts == {1: 2}
