@@ -835,13 +835,16 @@ def fit_composite(
             names, coefs[k], design, idx, float(devs[k]), dof, float(f0), sign, weight
         )
 
-    def lowest(ks: np.ndarray) -> int:  # the first of the least deviances (to 1e-9)
-        among = devs[ks]
-        return int(ks[np.flatnonzero(among < among.min() + 1e-9)[0]])
+    def lowest(ks: np.ndarray | None = None) -> int:  # the first of the least deviances (1e-9)
+        among = devs if ks is None else devs[ks]
+        first = int(np.argmax(among < among.min() + 1e-9))
+        return first if ks is None else int(ks[first])
 
-    best = composite(lowest(np.arange(len(devs))))
+    best = composite(lowest())
+    if best.coef[2] <= flicker_max:
+        return best
     possible = np.flatnonzero(coefs[:, 2] <= flicker_max)
-    if best.coef[2] <= flicker_max or not possible.size:
+    if not possible.size:
         return best
     # an adequate free fit keeps its B: a clean record whose correlated long-τ points dip by
     # chance under the plateau (measured: the default 12 h simulation's accel_z, capped to 55 %
