@@ -837,8 +837,8 @@ def fit_composite(
 
     def lowest(ks: np.ndarray | None = None) -> int:  # the first of the least deviances (1e-9)
         among = devs if ks is None else devs[ks]
-        first = int(np.argmax(among < among.min() + 1e-9))
-        return first if ks is None else int(ks[first])
+        at = int(np.argmax(among < among.min() + 1e-9))
+        return at if ks is None else int(ks[at])
 
     best = composite(lowest())
     if best.coef[2] <= flicker_max:
