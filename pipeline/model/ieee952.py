@@ -817,9 +817,8 @@ def fit_composite(
     signs = (1, -1) if prefilter else (1,)
     profiled = _profile_designs(tau_key, first, float(dense_from), grid.tobytes(), signs)
     designs = np.empty((*profiled.shape[:2], base.shape[1]))
-    designs[:, :, :5] = profiled
-    designs[:, :, 4] *= rate_ramp
-    designs[:, :, 5:] = base[idx, 5:]
+    designs[:, :, :4] = profiled[:, :, :4]  # Q, N, B, K by sign and cut-off; R and the extras
+    designs[:, :, 4:] = base[idx, 4:]
     a = np.ascontiguousarray(avar[idx], dtype=float)
     coefs, devs = _fit_designs(designs, a, np.ascontiguousarray(edf[idx] * weight, dtype=float))
 
