@@ -355,12 +355,17 @@ class _State:
         return replace(self, shape_intervals=shaped)
 
     def fit(
-        self, ax: _Axis, possible_b: bool = False, rate_ramp: bool = True
+        self,
+        ax: _Axis,
+        possible_b: bool = False,
+        rate_ramp: bool = True,
+        cutoff_hz: float | None = None,
     ) -> ieee952.CompositeFit:
         """The composite fit of this state; ``possible_b``: with B held to a plateau under
         the curve (:func:`ieee952.flicker_limit`) — the reported model.  The loop's decisions
         use the free fit (the constraint would move part of an unmodelled effect's hump from
-        B into the candidate being judged).  ``rate_ramp=False``: R held at 0."""
+        B into the candidate being judged).  ``rate_ramp=False``: R held at 0; ``cutoff_hz``:
+        the flicker cut-off given instead of profiled."""
         limit = ieee952.flicker_limit(ax.avar_hi(self.avar)) if possible_b else np.inf
         return _fit(
             ax.tau,
@@ -368,7 +373,7 @@ class _State:
             ax.edf,
             ax.tau_min,
             self.columns,
-            None,
+            cutoff_hz,
             self.n_nonlinear,
             limit,
             ax.dense_from,
@@ -384,9 +389,17 @@ class _State:
     def terms(self, ax: _Axis) -> ieee952.NoiseTerms:
         """The model of this state as reported: the IEEE 952 terms of its :meth:`reported_fit`
         (bounds capped by this state's curve) and the accepted AVAR effects; the noise terms'
-        intervals over the effects' shapes too (:meth:`shape_alternatives`)."""
+        intervals over the effects' shapes and the flicker cut-off too
+        (:meth:`shape_alternatives`, :func:`ieee952.cutoff_alternatives`)."""
+        reported = self.reported_fit(ax)
+        free_r = reported.rate_ramp_fit is None
+        cutoffs = ieee952.cutoff_alternatives(
+            reported,
+            lambda f0: self.fit(ax, True, free_r, f0),
+            ieee952.flicker_limit(ax.avar_hi(self.avar)),
+        )
         return ieee952.terms_from_fit(
-            self.reported_fit(ax),
+            reported,
             self.avar,
             ax.edf,
             ax.sig.sensor,
@@ -394,7 +407,7 @@ class _State:
             ax.avar_hi(self.avar),
             {k: self.effect_parameters[k] for k in self.columns},
             (ax.sig.tau0, ax.n_terms),
-            self.shape_alternatives(ax),
+            self.shape_alternatives(ax) + cutoffs,
         )
 
     def shape_alternatives(self, ax: _Axis) -> list[ieee952.CompositeFit]:
