@@ -589,13 +589,15 @@ class CompositeFit:
         j: int,
         room: float,
         correlation: np.ndarray | None = None,
+        known: tuple[float, float] | None = None,
     ) -> tuple[float, float]:
         """The :meth:`profile_interval` of coefficient ``j`` whose deviance may rise by ``room``
         (deviance units) over this fit's: at the level whose φ·c_j·χ²₁ is ``room`` (at least
-        1e-9) — a fit at another non-linear shape, which has used part of the room already."""
+        1e-9) — a fit at another non-linear shape, which has used part of the room already.
+        ``known``: see :meth:`profile_interval`."""
         scale = self.deviance_scale(edf, j, correlation)
         level = float(special.gammainc(0.5, room / scale / 2))  # χ²₁'s cdf
-        return self.profile_interval(avar, edf, j, max(level, 1e-9), correlation)
+        return self.profile_interval(avar, edf, j, max(level, 1e-9), correlation, known)
 
     def as_quantization(self, avar: np.ndarray, edf: np.ndarray) -> CompositeFit:
         """This fit with its 3/τ² column read as quantisation (sign +1) and refitted at the
@@ -619,11 +621,18 @@ class CompositeFit:
         j: int,
         level: float = 0.95,
         correlation: np.ndarray | None = None,
+        known: tuple[float, float] | None = None,
     ) -> tuple[float, float]:
         """Profile-likelihood interval (lo, hi) of coefficient ``j`` (lo = 0: not resolved;
         hi = inf: the deviance never rises past the limit, the data do not bound it).  The
         deviance may rise by φ·c_j·χ²₁(level): φ the dispersion, c_j the
-        :meth:`sandwich_factor` of the fitted points' ``correlation`` (1 without one)."""
+        :meth:`sandwich_factor` of the fitted points' ``correlation`` (1 without one).
+
+        ``known``: an interval (lo > 0) this one is to be united with
+        (:func:`over_alternatives`).  An end of it that lies beyond this fit's coefficient and
+        where the deviance is already past the limit holds this interval's end on its side
+        (the deviance crosses the limit between them): that end is returned as it is, one
+        refit instead of the walk to the crossing."""
         idx = self.fit_index
         x, a, nu = self.design[idx], avar[idx], self.nu(edf)
         others = np.delete(x, j, axis=1)
@@ -650,6 +659,7 @@ class CompositeFit:
             return dev - self.deviance - limit
 
         best = float(self.coef[j])
+        known_lo, known_hi = known or (np.nan, np.nan)
 
         def crossing(a: float, b: float, xtol: float) -> float | None:
             """The limit's crossing between the walk's last c within it and its first past
@@ -668,7 +678,9 @@ class CompositeFit:
         # solves inside that step.
         lo = 0.0
         inner = best
-        for c in best * np.linspace(0.9, 0.0, 10) if best > 0 else ():
+        if 0 < known_lo <= best and excess(known_lo) > 0:
+            lo = known_lo
+        for c in best * np.linspace(0.9, 0.0, 10) if best > 0 and not lo else ():
             if excess(c) > 0:  # a coefficient at its bound 0 has lo = 0
                 root = crossing(c, inner, 1e-6 * best)
                 if root is not None:
@@ -677,6 +689,8 @@ class CompositeFit:
             inner = c
         # upper end: 10 % steps up to 4x the fit (or from a tiny fraction of the data's
         # level), doubling beyond, until the deviance rises past the limit
+        if best <= known_hi < np.inf and excess(known_hi) > 0:
+            return lo, known_hi
         with np.errstate(over="ignore"):  # an all-zero column: inf, the search finds no end
             tiny = 1e-6 * float(np.min(a / np.maximum(np.abs(x[:, j]), 1e-300)))
         inner, c = best, max(1.1 * best, tiny)
@@ -1117,7 +1131,7 @@ def over_alternatives(
         room = chi2_ppf_1dof(0.95) - (alt.deviance - fit.deviance) / phi
         if room <= 0:
             continue
-        a_lo, a_hi = alt.interval_within(avar, edf, j, room * phi, correlation)
+        a_lo, a_hi = alt.interval_within(avar, edf, j, room * phi, correlation, (lo, hi))
         lo = min(lo, a_lo) if a_lo > 0 else lo
         hi = max(hi, a_hi)
     return lo, hi

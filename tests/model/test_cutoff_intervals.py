@@ -116,3 +116,54 @@ def test_the_loop_reports_its_terms_over_the_cutoffs_too(fitted) -> None:
     args = (done.fit, done.avar, done.edf, "accel", done.note, done.avar_hi)
     alone = ieee952.terms_from_fit(*args, sampling=sampling).random_walk
     assert terms.random_walk.hi - terms.random_walk.lo > 1.2 * (alone.hi - alone.lo)
+
+
+def test_a_known_interval_spares_the_walks_not_the_union(
+    fitted, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """:func:`ieee952.over_alternatives` hands each alternative the union so far: an end the
+    alternative's profile cannot pass costs one refit instead of a walk, and the union is the
+    one of the full walks (to the solver's tolerance)."""
+    refits = []
+    fit_gamma = ieee952.fit_nonneg_gamma
+    monkeypatch.setattr(
+        ieee952, "fit_nonneg_gamma", lambda *a, **k: refits.append(1) or fit_gamma(*a, **k)
+    )
+    for done, curve in fitted[:4]:
+        rho = ieee952.fit_correlation(done.fit, TAU0, np.asarray(curve.n_terms))
+        for j in (1, 2):  # N, B
+            correlated = ieee952.interval_correlation(done.fit, j, rho)
+            own = done.fit.profile_interval(done.avar, done.edf, j, correlation=correlated)
+            refits.clear()
+            args = (done.fit, done.alternatives, done.avar, done.edf, j, correlated, own)
+            lo, hi = ieee952.over_alternatives(*args)
+            spared = len(refits)
+            phi = done.fit.deviance_scale(done.edf, j, correlated)
+            walked_lo, walked_hi = own
+            refits.clear()
+            for alt in done.alternatives:  # the union of every alternative's whole walk
+                room = ieee952.chi2_ppf_1dof(0.95) - (alt.deviance - done.fit.deviance) / phi
+                if room > 0:
+                    a_lo, a_hi = alt.interval_within(done.avar, done.edf, j, room * phi, correlated)
+                    walked_lo = min(walked_lo, a_lo) if a_lo > 0 else walked_lo
+                    walked_hi = max(walked_hi, a_hi)
+            assert (lo, hi) == pytest.approx((walked_lo, walked_hi), rel=1e-9)
+            assert lo < own[0] or hi > own[1]  # the cut-offs widen it
+            assert spared * 3 < len(refits)
+
+
+def test_a_known_interval_beside_the_estimate_is_walked_past(fitted) -> None:
+    """A known interval wholly below or above this fit's coefficient (the union so far, where
+    the alternative's estimate lies outside it) holds its far end only: the near one is walked
+    past to this fit's own end."""
+    done, _ = fitted[0]
+    fit, j = done.fit, 1
+    plain = fit.profile_interval(done.avar, done.edf, j)
+    below = (0.5 * plain[0], 0.9 * plain[0])
+    walked = fit.profile_interval(done.avar, done.edf, j, known=below)
+    assert walked == pytest.approx((below[0], plain[1]), rel=1e-9)
+    above = (1.1 * plain[1], 2.0 * plain[1])
+    walked = fit.profile_interval(done.avar, done.edf, j, known=above)
+    assert walked == pytest.approx((plain[0], above[1]), rel=1e-9)
+    inside = (0.99 * plain[0], 1.01 * plain[1])  # both ends past the limit: kept
+    assert fit.profile_interval(done.avar, done.edf, j, known=inside) == inside
