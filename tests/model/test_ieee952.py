@@ -391,16 +391,24 @@ def test_b_limit_binds_only_a_rejected_fit():
     simulation's accel_z, whose long-τ points dip by chance), a misfit loses it."""
     tau = 0.01 * tau_factors(2**22)
     b_true = 1.3e-3
-    avar = ieee952.avar_model(tau, random_walk=2.8e-3, bias_instability=b_true)
-    edf = np.full_like(tau, 1e3)
     limit = 0.25 * b_true**2  # a cap far below the true B²
-    free = ieee952.fit_composite(tau, avar, edf, flicker_max=limit)
-    assert free.p_value >= ieee952.ADEQUATE_P
-    assert np.sqrt(free.coef[2]) == pytest.approx(b_true, rel=1e-3)
-    hump = avar * (1 + 2.0 * np.exp(-((np.log10(tau) - 1.0) ** 2) / 0.1))  # an unmodelled bump
-    held = ieee952.fit_composite(tau, hump, edf, flicker_max=limit)
-    assert held.p_value < ieee952.ADEQUATE_P
-    assert held.coef[2] <= limit
+    grid = ieee952.cutoff_grid(tau)
+    for n_true in (2.8e-3, 2e-4):  # N² above the cap, and below it (the cap reads B², not N²)
+        avar = ieee952.avar_model(tau, random_walk=n_true, bias_instability=b_true)
+        edf = np.full_like(tau, 1e3)
+        free = ieee952.fit_composite(tau, avar, edf, flicker_max=limit)
+        assert free.p_value >= ieee952.ADEQUATE_P
+        assert np.sqrt(free.coef[2]) == pytest.approx(b_true, rel=1e-3)
+        hump = avar * (1 + 2.0 * np.exp(-((np.log10(tau) - 1.0) ** 2) / 0.1))  # unmodelled bump
+        held = ieee952.fit_composite(tau, hump, edf, flicker_max=limit)
+        assert held.p_value < ieee952.ADEQUATE_P
+        assert held.coef[2] <= limit, n_true
+        # the least deviance of the cut-offs whose B² is possible: each fitted on its own
+        each = [ieee952.fit_composite(tau, hump, edf, cutoff_hz=f0) for f0 in grid]
+        allowed = [f for f in each if f.coef[2] <= limit]
+        assert len(allowed) < len(each)
+        chosen = min(allowed, key=lambda f: f.deviance)
+        assert (held.cutoff_hz, held.deviance) == (chosen.cutoff_hz, chosen.deviance), n_true
 
 
 def test_each_fit_reads_the_points_and_designs_of_its_own_start_tail_and_signs():
@@ -435,3 +443,33 @@ def test_each_fit_reads_the_points_and_designs_of_its_own_start_tail_and_signs()
     assert len({tuple(f.fit_index) for f in kept}) == 4
     assert kept[3].deviance <= kept[2].deviance  # both signs tried: never a worse fit
     assert not kept[0].fit_index.flags.writeable and not kept[0].weight.flags.writeable
+    key = tau.tobytes()
+    grid = ieee952._cutoff_grid(key)
+    shared = (*ieee952._fit_points(key, 0, np.inf), grid)
+    shared += (ieee952._profile_designs(key, 0, np.inf, grid.tobytes(), (1, -1)),)
+    assert not any(a.flags.writeable for a in shared)  # the τ columns, cut-offs and designs too
+
+
+def test_a_fit_from_the_defaults_is_the_profiles_fit_from_zero_with_no_offset():
+    """fit_nonneg_gamma without an offset or a start (spectral_line's and the bootstrap's
+    calls) is exactly the profile's fit of that design (``_fit_designs``: offset 0, from 0),
+    and a scalar offset is that offset at every τ, bit for bit; the caller's offset array is
+    left as it was."""
+    tau = 0.01 * 2.0 ** np.arange(16)
+    design = ieee952.design_columns(tau, 0.3)
+    edf = np.minimum.accumulate(1e5 / 2.0 ** np.arange(16) + 2)
+    model = design @ np.array([1e-8, 4e-6, 1e-7, 1e-9, 0.0])
+    avar = model * np.random.default_rng(4).chisquare(edf) / edf
+    coef, dev = ieee952.fit_nonneg_gamma(design, avar, edf)
+    coefs, devs = ieee952._fit_designs(design[None], avar, edf)
+    assert np.array_equal(coef, coefs[0]) and dev == devs[0]
+    assert np.array_equal(coef, ieee952.fit_nonneg_gamma(design, avar, edf, 0.0)[0])
+    offset = np.full(tau.size, 0.2 * model.min())
+    per_tau = ieee952.fit_nonneg_gamma(design, avar, edf, offset)
+    scalar = ieee952.fit_nonneg_gamma(design, avar, edf, float(offset[0]))
+    assert np.array_equal(per_tau[0], scalar[0]) and per_tau[1] == scalar[1]
+    assert per_tau[1] != dev and np.all(offset == 0.2 * model.min())
+    few = np.ascontiguousarray(design[:3])  # fewer τ than columns: a start of one per column
+    coefs, devs = ieee952._fit_designs(few[None], avar[:3], edf[:3])
+    coef, dev = ieee952.fit_nonneg_gamma(few, avar[:3], edf[:3])
+    assert np.array_equal(coef, coefs[0]) and dev == devs[0]

@@ -312,12 +312,15 @@ def test_fit_start_drops_short_tau_points_that_break_the_model() -> None:
 
 
 def test_degrees_of_freedom_are_points_minus_parameters() -> None:
-    """dof = fitted octave points − 5 terms (− 1 for a profiled finite cut-off), at least 1."""
+    """dof = fitted octave points − 5 terms (− 1 for a profiled finite cut-off), at least 1; a
+    finite cut-off given, not profiled, is no parameter."""
     for points, want in ((8, 3), (6, 1), (4, 1)):
         tau = 0.01 * 2.0 ** np.arange(points)
         avar = ieee952.avar_model(tau, random_walk=1e-3, rate_random_walk=1e-5)
         fit = ieee952.fit_composite(tau, avar, np.full_like(tau, 1e3), cutoff_hz=np.inf)
         assert fit.dof == want, points
+        given = ieee952.fit_composite(tau, avar, np.full_like(tau, 1e3), cutoff_hz=0.5)
+        assert (given.cutoff_hz, given.dof) == (0.5, want), points
 
 
 def test_profile_interval_of_a_column_the_data_do_not_bound_is_open_above() -> None:
