@@ -379,6 +379,8 @@ class Whitener:
         if self._chol is None:
             return self._inv_chol @ d
         x = np.array(d, dtype=float, order="F")  # (m,) or (m, k), overwritten with the solution
+        if len(x) != len(self._chol):  # LAPACK would read past the factor or the differences
+            raise ValueError(f"{len(x)} differences for a whitener of {len(self._chol)}")
         n, rhs = ctypes.byref(ctypes.c_int(len(x))), ctypes.c_int(x.size // max(len(x), 1))
         info = ctypes.c_int(0)
         if x.size:

@@ -134,6 +134,9 @@ def test_the_masked_solve_and_inverse_are_scipys_without_holding_the_gil():
         expected = effects.linalg.solve_triangular(chol, columns, lower=True, check_finite=False)
         assert np.array_equal(whiten.whitened(columns), expected)
     assert np.array_equal(d, kept)
+    for wrong in (d[:-1], np.vstack([d, d[:1]])):  # scipy refuses these too; LAPACK would not
+        with pytest.raises(ValueError, match=f"{len(wrong)} differences for a whitener of {m}"):
+            whiten.whitened(wrong)
     assert np.array_equal(whiten.inv_chol, effects.linalg.lapack.dtrtri(chol, lower=1)[0])
     singular = effects.Whitener.__new__(effects.Whitener)
     singular._chol = np.asfortranarray(np.diag([1.0, 0.0, 2.0]))
