@@ -167,3 +167,20 @@ def test_a_known_interval_beside_the_estimate_is_walked_past(fitted) -> None:
     assert walked == pytest.approx((plain[0], above[1]), rel=1e-9)
     inside = (0.99 * plain[0], 1.01 * plain[1])  # both ends past the limit: kept
     assert fit.profile_interval(done.avar, done.edf, j, known=inside) == inside
+
+
+def test_an_alternative_that_does_not_resolve_the_term_widens_its_upper_end_only(fitted) -> None:
+    """An alternative within the room on which the term is not resolved (its profile's lower
+    end 0) leaves the term resolved, its lower end the least resolved one."""
+    done, _ = fitted[0]
+    fit = done.fit
+    own = fit.profile_interval(done.avar, done.edf, 1)
+
+    class Unresolved:  # as close as the fit itself; N's profile reaches 0 there
+        deviance = fit.deviance
+
+        def interval_within(self, *args) -> tuple[float, float]:
+            return 0.0, 2.0 * own[1]
+
+    widened = ieee952.over_alternatives(fit, [Unresolved()], done.avar, done.edf, 1, None, own)
+    assert widened == (own[0], 2.0 * own[1])
