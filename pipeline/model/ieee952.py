@@ -1348,17 +1348,13 @@ def fit_curve(curve: AllanCurve) -> CurveFit:
     tau_min = float(tau[fit.fit_index[0]])
     held = fit_composite(tau, avar, edf, tau_min=tau_min, rate_ramp=False, **policy)
     reported = release_rate_ramp(fit, held)
-    refit = partial(
-        fit_composite,
-        tau,
-        avar,
-        edf,
-        tau_min=tau_min,
-        rate_ramp=reported.rate_ramp_fit is None,
-        **policy,
-    )
+    free_r = reported.rate_ramp_fit is None
     alternatives = cutoff_alternatives(
-        reported, lambda f0: refit(cutoff_hz=f0), policy["flicker_max"]
+        reported,
+        lambda f0: fit_composite(
+            tau, avar, edf, cutoff_hz=f0, tau_min=tau_min, rate_ramp=free_r, **policy
+        ),
+        policy["flicker_max"],
     )
     return CurveFit(reported, note, avar, edf, avar_hi, tuple(alternatives))
 
