@@ -1138,10 +1138,11 @@ def over_alternatives(
 
 
 def cutoff_alternatives(
-    fit: CompositeFit, refit: Callable[[float], CompositeFit], flicker_max: float = np.inf
+    fit: CompositeFit, refit: Callable[[float, bool], CompositeFit], flicker_max: float = np.inf
 ) -> list[CompositeFit]:
-    """``fit`` at every other flicker cut-off f0 of its :func:`cutoff_grid` (``refit(f0)``: the
-    same points, columns and R policy at that f0), for :func:`terms_from_fit`'s
+    """``fit`` at every other flicker cut-off f0 of its :func:`cutoff_grid` (``refit(f0,
+    rate_ramp)``: the same points and columns at that f0, R free or held at 0 as in ``fit``,
+    :func:`release_rate_ramp`), for :func:`terms_from_fit`'s
     ``alternatives``: f0 is profiled, so the noise terms' intervals are their profiles over it
     too (:func:`over_alternatives` keeps those within the deviance's room).  An alternative
     whose B is impossible (over ``flicker_max``, :func:`flicker_limit`) is left out unless it
@@ -1155,8 +1156,11 @@ def cutoff_alternatives(
     cut-offs on 87.5 % (half-width 0.34 %).  On the paper's gyro (43 min, 80 records) 95.0 →
     96.3 %, the half-width 0.46 → 0.49 %."""
     tau = 1.0 / fit.design[:, 1]
+    free_r = fit.rate_ramp_fit is None
     others = (
-        replace(refit(float(f0)), dof=fit.dof) for f0 in cutoff_grid(tau) if f0 != fit.cutoff_hz
+        replace(refit(float(f0), free_r), dof=fit.dof)
+        for f0 in cutoff_grid(tau)
+        if f0 != fit.cutoff_hz
     )
     return [alt for alt in others if alt.coef[2] <= flicker_max or alt.p_value >= ADEQUATE_P]
 
@@ -1348,11 +1352,10 @@ def fit_curve(curve: AllanCurve) -> CurveFit:
     tau_min = float(tau[fit.fit_index[0]])
     held = fit_composite(tau, avar, edf, tau_min=tau_min, rate_ramp=False, **policy)
     reported = release_rate_ramp(fit, held)
-    free_r = reported.rate_ramp_fit is None
     alternatives = cutoff_alternatives(
         reported,
-        lambda f0: fit_composite(
-            tau, avar, edf, cutoff_hz=f0, tau_min=tau_min, rate_ramp=free_r, **policy
+        lambda f0, rate_ramp: fit_composite(
+            tau, avar, edf, cutoff_hz=f0, tau_min=tau_min, rate_ramp=rate_ramp, **policy
         ),
         policy["flicker_max"],
     )

@@ -392,10 +392,9 @@ class _State:
         intervals over the effects' shapes and the flicker cut-off too
         (:meth:`shape_alternatives`, :func:`ieee952.cutoff_alternatives`)."""
         reported = self.reported_fit(ax)
-        free_r = reported.rate_ramp_fit is None
         cutoffs = ieee952.cutoff_alternatives(
             reported,
-            lambda f0: self.fit(ax, True, free_r, f0),
+            lambda f0, rate_ramp: self.fit(ax, True, rate_ramp, f0),
             ieee952.flicker_limit(ax.avar_hi(self.avar)),
         )
         return ieee952.terms_from_fit(

@@ -71,8 +71,8 @@ def test_an_alternative_with_an_impossible_b_is_left_out_unless_adequate(
     monkeypatch.setattr(ieee952, "cutoff_grid", lambda tau: grid)
     b2 = {1.0: 2.0, 2.0: 0.5, 3.0: 2.0, 5.0: 2.0, 6.0: 1.0}  # possible: B² <= 1
 
-    def at(f0: float) -> ieee952.CompositeFit:  # 5 Hz: impossible but adequate (D = 0)
-        coef = fit.coef.copy()
+    def at(f0: float, rate_ramp: bool) -> ieee952.CompositeFit:
+        coef = fit.coef.copy()  # 5 Hz: impossible but adequate (D = 0)
         coef[2] = b2[f0]
         deviance = 0.0 if f0 == 5.0 else 1e6
         return dataclasses.replace(fit, coef=coef, cutoff_hz=f0, deviance=deviance, dof=99)

@@ -308,7 +308,9 @@ def test_fit_noise_terms_is_fit_start_then_fit_composite(synth_rate, paper_gyro)
     # the intervals over the other flicker cut-offs, R held as in the fit
     alternatives = ieee952.cutoff_alternatives(
         fit,
-        lambda f0: ieee952.fit_composite(tau, avar, edf, None, f0, **policy, rate_ramp=False),
+        lambda f0, rate_ramp: ieee952.fit_composite(
+            tau, avar, edf, None, f0, **policy, rate_ramp=rate_ramp
+        ),
         limit,
     )
     sampling = (tau0, curve.n_terms)
