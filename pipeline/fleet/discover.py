@@ -9,11 +9,13 @@ fsspec's local file system too, so one set of rules covers both:
   extension (a file that is not MCAP then fails as that unit, with its one-line error);
 - a directory holding ``metadata.yaml`` is a rosbag2 recording;
 - any other directory is searched recursively for ``*.mcap`` and ``*.db3`` files (rosbag2's
-  SQLite storage) and rosbag2 directories.
+  SQLite storage) and rosbag2 directories; on the local file system, symbolic links to
+  directories inside it are followed (each real directory searched once).
 """
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -60,15 +62,32 @@ def _is_bag(fs: fsspec.AbstractFileSystem, path: str) -> bool:
     return fs.isfile(f"{path.rstrip('/')}/{ROSBAG2_METADATA}")
 
 
-def _walk(fs: fsspec.AbstractFileSystem, root: str) -> list[tuple[str, bool]]:
-    """(path, is_dir) of the recordings under a directory that is not itself a bag."""
+def _walk(
+    fs: fsspec.AbstractFileSystem, root: str, walked: set[str] | None = None
+) -> list[tuple[str, bool]]:
+    """(path, is_dir) of the recordings under a directory that is not itself a bag.
+
+    On the local file system a symbolic link to a directory (which fsspec's ``find`` lists as
+    a leaf) is followed like a directory: a linked bag is a recording, a linked folder is
+    searched.  ``walked``: the real paths of the directories searched so far (a link back up
+    the tree, or a second link to a searched folder, adds nothing)."""
+    walked = set() if walked is None else walked
+    local = isinstance(fs, LocalFileSystem)
+    if local:
+        walked.add(os.path.realpath(root))
     found: list[tuple[str, bool]] = []
     files = sorted(fs.find(root))
+    linked = {f for f in files if local and os.path.isdir(f)}  # links to directories
     bags = sorted({f.rsplit("/", 1)[0] for f in files if f.rsplit("/", 1)[-1] == ROSBAG2_METADATA})
     found += [(b, True) for b in bags]
     for f in files:
         inside_bag = any(f.startswith(b + "/") for b in bags)
-        if f.endswith(STORAGE_SUFFIXES) and not inside_bag:
+        if inside_bag:
+            continue
+        if f in linked:
+            if os.path.realpath(f) not in walked:
+                found += [(f, True)] if _is_bag(fs, f) else _walk(fs, f, walked)
+        elif f.endswith(STORAGE_SUFFIXES):
             found.append((f, False))
     return found
 
@@ -156,7 +175,8 @@ def unique_names(paths: Iterable[str]) -> list[str]:
 
 
 def discover(specs: Sequence[str]) -> list[Recording]:
-    """The recordings that ``specs`` (paths, globs, fsspec URLs) name, each once, in order.
+    """The recordings that ``specs`` (paths, globs, fsspec URLs) name, each once (a local one
+    reached through several links too), in order.
 
     Raises:
         FleetError: an argument that names no recording, or an unknown URL protocol.
@@ -165,7 +185,8 @@ def discover(specs: Sequence[str]) -> list[Recording]:
     seen: set[tuple[str, str]] = set()
     for spec in specs:
         for fs, path, is_dir in _expand(str(spec)):
-            key = (fs.protocol if isinstance(fs.protocol, str) else fs.protocol[0], path)
+            protocol = fs.protocol if isinstance(fs.protocol, str) else fs.protocol[0]
+            key = (protocol, os.path.realpath(path) if isinstance(fs, LocalFileSystem) else path)
             if key not in seen:
                 seen.add(key)
                 found.append((fs, path, is_dir))

@@ -521,6 +521,38 @@ def test_discover_files_bags_folders_globs(tmp_path):
     )
 
 
+def test_discover_follows_links_to_bags_and_folders_once(tmp_path):
+    """A folder of symbolic links (to a rosbag2 directory, to a folder of MCAP files, to a
+    file) yields every linked recording, named by its link, once: a link back up the tree and
+    a second link to the same folder add nothing (fsspec's ``find`` lists a link to a
+    directory as a leaf: until session 50 such units were dropped without a word)."""
+    store = tmp_path / "store"
+    bag = store / "imu1"
+    bag.mkdir(parents=True)
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (bag / "imu1_0.mcap").write_bytes(b"x")
+    (store / "sims").mkdir()
+    (store / "sims" / "sim_0.mcap").write_bytes(b"x")
+    (store / "lone.mcap").write_bytes(b"x")
+    fleet = tmp_path / "fleet"
+    fleet.mkdir()
+    (fleet / "unit_a").symlink_to(bag)
+    (fleet / "simulated").symlink_to(store / "sims")
+    (fleet / "again").symlink_to(store / "sims")  # the same folder twice
+    (fleet / "up").symlink_to(fleet)  # two loops: followed, they would branch 2**40 times
+    (fleet / "z_up").symlink_to(fleet)
+    (fleet / "b.mcap").symlink_to(store / "lone.mcap")
+    recs = discover([str(fleet)])
+    assert [(r.name, r.is_dir) for r in recs] == [
+        ("sim_0", False),
+        ("b", False),
+        ("unit_a", True),
+    ]
+    assert recs[0].location == str(fleet / "again" / "sim_0.mcap")  # listed before "simulated"
+    assert recs[2].location == str(fleet / "unit_a")
+    assert [r.name for r in discover([str(fleet / "unit_a"), str(bag)])] == ["unit_a"]
+
+
 def test_unit_names_are_safe_and_unique():
     assert unique_names(["/x/../a b.mcap", "/y/a b.mcap", "/z/a_b-2.mcap", "/w/.hidden"]) == [
         "x_a_b",
