@@ -23,7 +23,7 @@ from typing import Annotated, NoReturn
 
 import typer
 
-from imupipe import stopping
+from imupipe import __version__, stopping
 from imupipe.errors import ImupipeError
 from imupipe.escape import printable
 from imupipe.report.exports import (
@@ -42,6 +42,25 @@ app = typer.Typer(
 )
 
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars.")]
+
+
+def _print_version(asked: bool) -> None:
+    if asked:
+        typer.echo(f"imupipe {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_print_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
+    """Options before the command (``imupipe --version``: the version that writes
+    ``report.json``'s ``generator``)."""
 
 
 class Source(StrEnum):

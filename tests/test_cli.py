@@ -193,6 +193,17 @@ def test_the_command_is_the_console_entry_point() -> None:
     assert script.value == "imupipe.cli:console"
 
 
+def test_version_is_the_installed_distributions_and_the_reports_generator(cli) -> None:
+    """``imupipe --version`` prints the version ``report.json`` names as its generator, which
+    is the installed distribution's (pyproject.toml's) too, and exits 0 without a command."""
+    from importlib.metadata import version
+
+    import imupipe
+
+    assert cli(["--version"]) == (0, f"imupipe {version('imupipe')}\n", "")
+    assert imupipe.__version__ == version("imupipe")
+
+
 def test_fleet_passes_the_time_window_to_every_unit(tmp_path: Path, cli, monkeypatch) -> None:
     """``imupipe fleet --start 600 --end -300``: every unit's analysis gets the window (as
     ``imupipe analyze`` does); run_fleet stands in for the cluster."""
