@@ -160,7 +160,8 @@ def _argv(command: DocCommand, workspace: Path) -> list[str]:
 def test_every_command_of_the_page_runs(page: str, tmp_path: Path, robot_bag: Path) -> None:
     commands = [c for c in all_commands() if c.page == page]
     workspace = _workspace(tmp_path, robot_bag)
-    known = set(typer.main.get_command(app).commands)
+    group = typer.main.get_command(app)
+    known = set(group.commands) | {o for p in group.params for o in p.opts}  # --version
     env = os.environ | {"NUMBA_NUM_THREADS": "1"}
     ran = 0
     for command in commands:
