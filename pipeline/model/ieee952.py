@@ -1233,7 +1233,7 @@ def terms_from_fit(
             if lo == 0:
                 signed = (
                     f"; the term fits best negative, -{prefilter:.3g}/tau^2, with 0 in its 95 % "
-                    f"interval [0, {3 * hi_profile:.3g}], so no prefilter's correlation of "
+                    f"interval [-{3 * hi_profile:.3g}, 0], so no prefilter's correlation of "
                     "neighbouring samples is resolved either"
                 )
                 hi_profile = _quantization_bound(fit, avar, edf, correlated)
@@ -1242,7 +1242,7 @@ def terms_from_fit(
         if j == 0 and fit.short_sign < 0 and lo > 0:
             reason = (
                 f"masked: the 1/tau^2 AVAR term is negative (-{prefilter:.3g}/tau^2, 95 % "
-                f"[{3 * lo:.3g}, {3 * hi:.3g}]), the signature of neighbouring samples "
+                f"[-{3 * hi:.3g}, -{3 * lo:.3g}]), the signature of neighbouring samples "
                 "correlated by the sensor's prefilter; quantisation cannot be separated from it"
             )
             terms[name] = NoiseTerm(None, None, None, unit, reason)

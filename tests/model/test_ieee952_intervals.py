@@ -234,7 +234,7 @@ def test_a_negative_short_term_whose_interval_holds_zero_leaves_q_its_bound() ->
     assert q.value is None and q.lo is None and "signature" not in q.reason
     tail = (
         f"the term fits best negative, -{3 * fit.coef[0]:.3g}/tau^2, with 0 in its 95 % "
-        f"interval [0, {3 * hi:.3g}], so no prefilter's correlation of neighbouring samples is "
+        f"interval [-{3 * hi:.3g}, 0], so no prefilter's correlation of neighbouring samples is "
         "resolved either)"
     )
     assert q.reason == (
@@ -277,7 +277,8 @@ def test_a_negative_short_term_whose_interval_holds_zero_leaves_q_its_bound() ->
 def test_negative_short_term_is_reported_as_the_prefilter_with_its_interval() -> None:
     """AVAR = N²/τ − C/τ² (white noise through a low-pass prefilter, module doc) with gamma
     scatter: the 1/τ² column's sign is −1, Q is masked, C = 3 × its coefficient, and the
-    reason states −C/τ² with the 95 % interval of C (3 × the profile interval's ends)."""
+    reason states −C/τ² with its 95 % interval, [−3 × hi, −3 × lo] of the profile interval of
+    the column's magnitude (until session 50 the magnitude's, beside a negative value)."""
     n2, c = 1e-6, 2e-9
     tau = 0.04 * 2.0 ** np.arange(16)
     edf = 1e5 / 2.0 ** np.arange(16) + 3.0
@@ -291,7 +292,7 @@ def test_negative_short_term_is_reported_as_the_prefilter_with_its_interval() ->
     assert terms.prefilter_avar_s2 == pytest.approx(c, rel=0.2)
     q = terms.quantization
     assert q.value is None and q.lo is None and q.hi is None and q.unit == "rad"
-    assert f"(-{3 * fit.coef[0]:.3g}/tau^2, 95 % [{3 * lo:.3g}, {3 * hi:.3g}])" in q.reason
+    assert f"(-{3 * fit.coef[0]:.3g}/tau^2, 95 % [-{3 * hi:.3g}, -{3 * lo:.3g}])" in q.reason
     assert terms.random_walk.value == pytest.approx(np.sqrt(n2), rel=0.01)
     np.testing.assert_allclose(terms.avar(tau), n2 / tau - 3 * fit.coef[0] / tau**2, rtol=0.02)
 
