@@ -75,6 +75,9 @@ WELCH_KEPT = 8  # per axis (:meth:`_Axis.welch`: Welch spectra by segment length
 SHAPES_KEPT = 4096  # effect columns (:func:`_shape_column`; with their τ keys ~9 MB on a real unit)
 HANN_KEPT = 2  # per axis (:meth:`_Axis.hann`: the full-rate series' and the block means')
 N_BOOT = 200
+P_VALUE_FLOOR = 1.0 / (N_BOOT + 1)
+"""The smallest bootstrap p-value :func:`goodness` can give: no replicate reached the deviance
+(the true p is at most this; report.json ``p_value_floor``, report.md "≤")."""
 EFFECT_KINDS = (
     "temperature",
     "supply",
@@ -270,6 +273,11 @@ class LoopResult:
     def z_after(self) -> np.ndarray:
         return self.after.z
 
+    @property
+    def p_value_floor(self) -> float:
+        """:data:`P_VALUE_FLOOR`: the smallest p-value of :attr:`before` and :attr:`after`."""
+        return P_VALUE_FLOOR
+
     def as_model_dict(self) -> dict:
         """report.json ``model`` block (issue 4 contract): the final model's terms (IEEE 952 and
         the accepted AVAR effects) and the goodness of fit before and after."""
@@ -285,6 +293,7 @@ class LoopResult:
             "dof_before": self.before.dof,
             "p_value_before": self.before.p_value,
             "p_value_after": self.after.p_value,
+            "p_value_floor": self.p_value_floor,
             "rms_z_before": self.before.rms_z,
             "rms_z_after": self.after.rms_z,
             "max_abs_z_before": self.before.max_abs_z,
@@ -495,7 +504,7 @@ def goodness(
         error=fit.deviance / fit.dof,
         deviance=fit.deviance,
         dof=fit.dof,
-        p_value=float((1 + np.sum(boot >= fit.deviance)) / (N_BOOT + 1)),
+        p_value=float((1 + np.sum(boot >= fit.deviance)) * P_VALUE_FLOOR),
         z=z,
         max_abs_z=float(abs(z[k])),
         tau_max_abs_z=float(tau[k]),

@@ -110,6 +110,16 @@ def _before_after(model: dict, key: str) -> str:
     return f"{_fmt(model.get(key + '_before'))} → {_fmt(model.get(key + '_after'))}"
 
 
+def _p_before_after(model: dict) -> str:
+    """The bootstrap p-values before → after, "≤ floor" where no replicate reached the
+    deviance (``p_value_floor``: the true p is at most that)."""
+
+    def text(p: float | None) -> str:
+        return f"≤ {_fmt(p)}" if p is not None and p <= model["p_value_floor"] else _fmt(p)
+
+    return f"{text(model.get('p_value_before'))} → {text(model.get('p_value_after'))}"
+
+
 def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
     """Per looped axis: error, p-value, rms z and max |z| (at which tau), before → after."""
     rows = []
@@ -133,7 +143,7 @@ def _loop_rows(result: AnalysisResult) -> list[tuple[str, ...]]:
             (
                 axis.name,
                 error,
-                _before_after(model, "p_value"),
+                _p_before_after(model),
                 _before_after(model, "rms_z"),
                 f"{_before_after(model, 'max_abs_z')} (τ {tau_max} s)",
                 ranges[1] if ranges[0] == ranges[1] else " → ".join(ranges),
@@ -325,7 +335,15 @@ def report_markdown(
     md += _events_section(result)
     loop_rows = _loop_rows(result)
     if loop_rows:
-        md += ["## Closed loop: model error before and after", "", f"Error: {ERROR_MEASURE}.", ""]
+        floor = next(a.loop.p_value_floor for a in result.axes.values() if a.loop)
+        md += [
+            "## Closed loop: model error before and after",
+            "",
+            f"Error: {ERROR_MEASURE}. p-value: the share of {round(1 / floor) - 1} "
+            "parametric-bootstrap replicates of the model whose deviance reaches the fit's "
+            f"(≤ {_fmt(floor)}: none did, and the true p-value is at most that).",
+            "",
+        ]
         if any(axis.loop and axis.loop.error_before_final_range for axis in result.axes.values()):
             md += [
                 "Where a modelled short-τ line widened the fitted τ range, the error before is "

@@ -74,7 +74,7 @@ def _curve() -> AllanCurve:
 
 def _loop(terms_after: ieee952.NoiseTerms) -> LoopResult:
     z = np.zeros_like(TAU)
-    before = Goodness(4.23456, 40.0, 40, 0.000123, z, 5.98765, 100.0, 3.14159, 4, (0.01, 200.0))
+    before = Goodness(4.23456, 40.0, 40, 1 / 201, z, 5.98765, 100.0, 3.14159, 4, (0.01, 200.0))
     after = Goodness(1.034567, 30.0, 38, 0.41234, z, 2.21212, 0.1, 0.912345, 0, (0.001, 200.0))
     effect = AcceptedEffect(
         kind="temperature",
@@ -228,7 +228,7 @@ def test_loop_before_after_rounded_in_order(md: str) -> None:
     assert cells == [
         "accel_x",
         "4.235 → 1.035",  # error
-        "0.000123 → 0.4123",  # p-value
+        "≤ 0.004975 → 0.4123",  # p-value: no bootstrap replicate reached the deviance before
         "3.142 → 0.9123",  # rms z
         "5.988 → 2.212 (τ 100 → 0.1 s)",  # max |z| at tau
         "0.01–200 → 0.001–200",  # the fitted tau, before → after
@@ -236,6 +236,10 @@ def test_loop_before_after_rounded_in_order(md: str) -> None:
         "temperature",
     ]
     assert sum(ln.startswith("| gyro_") for ln in md.split("## Closed loop")[1].splitlines()) == 0
+    assert (
+        "p-value: the share of 200 parametric-bootstrap replicates of the model whose deviance "
+        "reaches the fit's (≤ 0.004975: none did, and the true p-value is at most that)."
+    ) in md
     assert (
         "- accepted **temperature** (coefficient = 0.0001235 [0.0001111, 0.0001333], "
         "lag_s = 12; level: moving average): error 4.235 → 1.035"
