@@ -341,7 +341,13 @@ def report_markdown(
             "",
             f"Error: {ERROR_MEASURE}. p-value: the share of {round(1 / floor) - 1} "
             "parametric-bootstrap replicates of the model whose deviance reaches the fit's "
-            f"(≤ {_fmt(floor)}: none did, and the true p-value is at most that).",
+            f"(≤ {_fmt(floor)}: none did, and the true p-value is at most that). Besides its "
+            "own test, an effect is accepted only where the model's deviance falls by at least "
+            "χ²₁(0.95) = 3.84 in Allan space or in the time domain (−2 ln L of the whitened "
+            "series) and the time-domain one does not rise by more than that (a linear ramp, "
+            "which neither can show, only where it does not rise); each accepted effect below "
+            "gives its Allan-space error before → after and, in parentheses, the falls that "
+            "rule read.",
             "",
         ]
         if any(axis.loop and axis.loop.error_before_final_range for axis in result.axes.values()):
@@ -420,6 +426,22 @@ def _kind_text(record: dict) -> str:
     return f"{record.get('kind')}{harmonic}"
 
 
+def _falls_text(evidence: dict) -> str:
+    """Both errors' falls (χ² units) that the loop's acceptance rule read for an effect
+    (:func:`imupipe.model.loop._error_reasons`), where it measured them: the Allan-space error
+    may rise while the time-domain likelihood rises more (a bias step on a real unit)."""
+    if "allan_error_fall_chi2" not in evidence:
+        return ""
+    text = f" (Allan deviance fall {evidence['allan_error_fall_chi2']:.1f}"
+    if evidence.get("time_domain_error_judged"):
+        text += (
+            f"; time-domain {_fmt(evidence['time_domain_error_before'])} → "
+            f"{_fmt(evidence['time_domain_error_after'])}, deviance fall "
+            f"{evidence['time_domain_deviance_fall']:.1f}"
+        )
+    return text + ")"
+
+
 def _loop_details(result: AnalysisResult) -> list[str]:
     md = []
     for axis in result.axes.values():
@@ -432,6 +454,7 @@ def _loop_details(result: AnalysisResult) -> list[str]:
                 f"- accepted **{_kind_text(effect)}** ({_params(effect)}"
                 f"{'' if level is None else f'; level: {level}'}): error "
                 f"{_fmt(effect.get('error_before'))} → {_fmt(effect.get('error_after'))}"
+                + _falls_text(effect.get("evidence") or {})
             )
         for cand in jsonable(axis.loop.rejected):
             md.append(f"- rejected candidate {_kind_text(cand)}: {cand.get('reason', '')}".rstrip())

@@ -238,7 +238,9 @@ def test_loop_before_after_rounded_in_order(md: str) -> None:
     assert sum(ln.startswith("| gyro_") for ln in md.split("## Closed loop")[1].splitlines()) == 0
     assert (
         "p-value: the share of 200 parametric-bootstrap replicates of the model whose deviance "
-        "reaches the fit's (≤ 0.004975: none did, and the true p-value is at most that)."
+        "reaches the fit's (≤ 0.004975: none did, and the true p-value is at most that). "
+        "Besides its own test, an effect is accepted only where the model's deviance falls by "
+        "at least χ²₁(0.95) = 3.84 in Allan space or in the time domain"
     ) in md
     assert (
         "- accepted **temperature** (coefficient = 0.0001235 [0.0001111, 0.0001333], "
@@ -396,6 +398,26 @@ def test_segments_are_a_table_with_their_frames_and_times() -> None:
 )
 def test_the_analysed_window_in_words(window, text) -> None:
     assert report.window_text(window) == text
+
+
+def test_an_accepted_effect_shows_the_falls_its_acceptance_read() -> None:
+    """A bias step of the real ADIS16405 unit 2 (accel_y, session 50): its Allan-space error
+    rose (3.089 → 3.172) and it was accepted on the time-domain deviance's fall of 42; the
+    report says so, not the rising error alone.  A fall the rule did not judge is not shown,
+    and an effect without the errors' evidence (an AVAR term's line) gets nothing."""
+    evidence = {
+        "allan_error_fall_chi2": -0.26872,
+        "time_domain_error_before": 1.05628,
+        "time_domain_error_after": 1.09298,
+        "time_domain_deviance_fall": 41.9785,
+        "time_domain_error_judged": True,
+    }
+    assert report._falls_text(evidence) == (
+        " (Allan deviance fall -0.3; time-domain 1.056 → 1.093, deviance fall 42.0)"
+    )
+    unjudged = evidence | {"time_domain_error_judged": False}
+    assert report._falls_text(unjudged) == " (Allan deviance fall -0.3)"
+    assert report._falls_text({"level": "moving average"}) == ""
 
 
 def test_an_effects_interval_is_shown_only_when_it_has_both_ends() -> None:
