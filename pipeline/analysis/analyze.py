@@ -25,7 +25,7 @@ import polars as pl
 from numba.core.dispatcher import Dispatcher
 from threadpoolctl import threadpool_limits
 
-from imupipe.analysis.at_rest import specific_force_warning
+from imupipe.analysis.at_rest import coincident_step_warnings, specific_force_warning
 from imupipe.analysis.condition import (
     ABSENT,
     ConditionedSeries,
@@ -460,6 +460,7 @@ def analyze(
             *(stuck_warning(a, why) for a, why in stuck.items()),
             *outlier_warnings(results),
             *filter(None, [specific_force_warning(results)]),
+            *coincident_step_warnings(results),
             *(found.warnings() if found is not None else []),
             *source.notes(series.segment.frames, options.rrd, at_once),
         ]

@@ -10,6 +10,13 @@ gravity, 9.78-9.83 m/s² on the Earth's surface, give or take the bias and scale
 sensor (the two real ADIS16405 units of ../shared/reference: 9.965 and 9.982 m/s²).  A
 magnitude far from that says the units are not m/s², or the sensor was not at rest; one
 near 0, that the driver removed gravity (a "linear acceleration" output).
+
+A level change of several axes at one instant says the same of a moment of the record: the
+closed loop finds a bias step on each axis alone (the joint event search sees transients, not
+lasting level changes: docs/events.md), and steps whose 95 % time intervals overlap on several
+axes are one shift of the whole unit — a tilt moving gravity's projection, a bump, a supply
+change — which :func:`coincident_step_warnings` names (the real ADIS16405 unit 2: one step at
+2020 s on all three accelerometers).
 """
 
 from __future__ import annotations
@@ -56,3 +63,47 @@ def specific_force_warning(axes: Mapping[str, AxisResult]) -> str | None:
         f"{said}: accelerations in another unit than m/s² (REP 103), or a sensor that was not "
         "at rest; the noise terms assume a static recording"
     )
+
+
+STEP_KIND = "bias_step"
+"""The loop's effect kind of a lasting level change (:mod:`imupipe.model.loop`)."""
+
+
+def coincident_step_warnings(axes: Mapping[str, AxisResult]) -> list[str]:
+    """One warning per instant at which the loops of two or more axes each accepted a bias
+    step, their 95 % time intervals (``time_s``, s from the analysed start) overlapping
+    (chained: a step overlapping one of the group joins it); the sizes in each axis' SI unit.
+    The steps stay corrected per axis: the warning says they are one event of the unit."""
+    steps = sorted(
+        (
+            (*effect.intervals.get("time_s", [effect.params["time_s"]] * 2), name, effect)
+            for name, axis in axes.items()
+            if axis.loop is not None
+            for effect in axis.loop.accepted
+            if effect.kind == STEP_KIND
+        ),
+        key=lambda step: step[:3],
+    )
+    groups: list[list[tuple]] = []
+    for step in steps:
+        if groups and step[0] <= max(s[1] for s in groups[-1]):
+            groups[-1].append(step)
+        else:
+            groups.append([step])
+    warnings = []
+    for group in groups:
+        if len({name for _, _, name, _ in group}) < 2:
+            continue
+        times = sorted(effect.params["time_s"] for *_, effect in group)
+        sizes = ", ".join(
+            f"{name} {effect.params['size']:.3g} {axes[name].unit}"
+            for _, _, name, effect in sorted(group, key=lambda s: list(axes).index(s[2]))
+        )
+        warnings.append(
+            f"bias steps at the same instant on several axes, {times[0]:.0f}"
+            + (f"-{times[-1]:.0f}" if times[-1] > times[0] else "")
+            + f" s [{min(s[0] for s in group):.0f}, {max(s[1] for s in group):.0f}] ({sizes}): "
+            "one shift of the whole unit (a tilt, a bump or a supply change), found by each "
+            "axis' loop and corrected on each; the recording was not static there"
+        )
+    return warnings

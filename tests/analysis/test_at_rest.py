@@ -1,5 +1,6 @@
 """The specific-force check: a static IMU's accelerometers measure gravity, so a mean vector far
-from 9.81 m/s² says the accelerations are in g (or another unit), or the sensor moved."""
+from 9.81 m/s² says the accelerations are in g (or another unit), or the sensor moved; and bias
+steps the loop found at one instant on several axes are named as one shift of the unit."""
 
 from __future__ import annotations
 
@@ -7,7 +8,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from imupipe.analysis.at_rest import specific_force_warning
+from imupipe.analysis.at_rest import coincident_step_warnings, specific_force_warning
+from imupipe.model.loop import AcceptedEffect
 
 
 def axes(x: float, y: float, z: float) -> dict:
@@ -51,3 +53,78 @@ def test_without_all_three_accelerometers_nothing_is_said() -> None:
     two = axes(0.0, 0.0, 1.0)
     del two["accel_y"]  # not analysed (stuck, or not provided): no gravity vector
     assert specific_force_warning(two) is None
+
+
+def _step(t: float, lo: float, hi: float, size: float) -> AcceptedEffect:
+    return AcceptedEffect(
+        "bias_step", {"time_s": t, "size": size}, {"time_s": [lo, hi]}, {}, 2.0, 1.0
+    )
+
+
+def _looped(**accepted: list[AcceptedEffect]) -> dict:
+    unit = {"gyro": "rad/s", "accel": "m/s^2"}
+    return {
+        name: SimpleNamespace(loop=SimpleNamespace(accepted=effects), unit=unit[name[:-2]])
+        for name, effects in accepted.items()
+    }
+
+
+def test_steps_whose_intervals_overlap_on_several_axes_are_one_warning() -> None:
+    """The real ADIS16405 unit 2 (session 50): steps at 2020 s on its three accelerometers,
+    one warning naming the instant, its span and each axis' size in the axis' order; its steps
+    at 540 s and 740 s, on one axis each, and a sinusoid at any time say nothing.  Intervals
+    that only chain (c overlaps a, not b; d touches c) are one instant."""
+    sinusoid = AcceptedEffect("sinusoid", {"frequency_hz": 0.565}, {}, {}, 9.0, 1.0)
+    axes = _looped(
+        gyro_x=[sinusoid],
+        accel_z=[_step(540.0, 530.0, 560.0, 0.0203), _step(2020.0, 2010.0, 2030.0, -0.0135)],
+        accel_x=[_step(2020.0, 2010.0, 2030.0, -0.0209)],
+        accel_y=[_step(740.0, 730.0, 750.0, 0.0171), _step(2020.0, 2011.0, 2025.0, -0.0126)],
+    )
+    assert coincident_step_warnings(axes) == [
+        "bias steps at the same instant on several axes, 2020 s [2010, 2030] (accel_z "
+        "-0.0135 m/s^2, accel_x -0.0209 m/s^2, accel_y -0.0126 m/s^2): one shift of the whole "
+        "unit (a tilt, a bump or a supply change), found by each axis' loop and corrected on "
+        "each; the recording was not static there"
+    ]
+    chained = _looped(
+        gyro_x=[_step(100.0, 90.0, 130.0, 1e-4)],
+        gyro_y=[_step(102.0, 100.0, 105.0, 2e-4)],  # inside gyro_x's
+        gyro_z=[_step(125.0, 120.0, 140.0, 3e-4)],  # overlaps gyro_x's only
+        accel_x=[_step(145.0, 140.0, 150.0, 0.01)],  # touches gyro_z's
+    )
+    (warning,) = coincident_step_warnings(chained)
+    assert warning.startswith(
+        "bias steps at the same instant on several axes, 100-145 s [90, 150] (gyro_x 0.0001 "
+        "rad/s, gyro_y 0.0002 rad/s, gyro_z 0.0003 rad/s, accel_x 0.01 m/s^2)"
+    )
+
+
+def test_steps_apart_or_on_one_axis_are_no_warning() -> None:
+    apart = _looped(
+        accel_x=[_step(1000.0, 990.0, 1010.0, 0.02)],
+        accel_y=[_step(1020.0, 1010.5, 1030.0, 0.02)],  # starts after accel_x's ends
+    )
+    assert coincident_step_warnings(apart) == []
+    one_axis = _looped(accel_x=[_step(1000.0, 990.0, 1010.0, 0.02), _step(1005.0, 1000, 1010, 1)])
+    assert coincident_step_warnings(one_axis) == []
+    assert coincident_step_warnings({"gyro_x": SimpleNamespace(loop=None, unit="rad/s")}) == []
+
+
+def test_a_simulated_tilt_at_one_instant_is_named_in_the_reports_warnings(tmp_path) -> None:
+    """1 h of the simulated ADIS16364 whose accel_x and accel_y biases jump by ±1.5 mg at
+    1800 s (a scenario file): each axis' loop finds its step, and the analysis' warnings (the
+    command's stderr, report.json's input.warnings) name the one instant on both axes."""
+    import imupipe
+
+    scenario = tmp_path / "tilt.toml"
+    scenario.write_text(
+        'name = "tilt"\n'
+        '[[bias_step]]\naxis = "accel_x"\ntime_s = 1800.0\nsize = 1.5\n'
+        '[[bias_step]]\naxis = "accel_y"\ntime_s = 1800.0\nsize = -1.5\n'
+    )
+    imupipe.record(tmp_path / "tilt.mcap", duration="1h", seed=3, scenario=scenario)
+    result = imupipe.analyze(tmp_path / "tilt.mcap", tmp_path / "out", rrd=False, figures=False)
+    (warning,) = [w for w in result.input.warnings if w.startswith("bias steps")]
+    assert warning.startswith("bias steps at the same instant on several axes, 1800 s [")
+    assert "(accel_x 0.01" in warning and ", accel_y -0.01" in warning
