@@ -53,14 +53,16 @@ EFFECT_KINDS = (
     "thermal_lag",
     "prefilter",
     "lowpass",
+    "shift",
 )
 """Undeclared effects (``thermal_lag``: the temperature coupling through a first-order lag,
 the heat reaching the sensing element after the thermometer; ``prefilter``: the sensor's own
 low-pass filter on the axis' output, a moving average, Bartlett window or first-order
 low-pass; ``lowpass``: a MEMS part's digital low-pass, a Butterworth of order 2 or 4 run at the
-output rate, as the configurable DLPF of many MEMS IMUs).  A supply-voltage coupling is
-not generated: a sensor_msgs/Imu bag carries no supply channel (nothing could be coupled to
-it)."""
+output rate, as the configurable DLPF of many MEMS IMUs; ``shift``: a lasting tilt, a step of
+gravity's projection on accel x and y of different sizes at one instant).  A supply-voltage
+coupling is not generated: a sensor_msgs/Imu bag carries no supply channel (nothing could be
+coupled to it)."""
 OVERSAMPLE = 8
 """A vibration is generated this many times faster than the sensor's rate and sampled."""
 LN2 = np.log(2.0)
@@ -216,6 +218,9 @@ def add_effect(
     def amp(tau: float) -> float:
         return float(size * noise.adev(tau))
 
+    def amp_of(b: int, tau: float) -> float:
+        return float(size * truth_noise[AXES[b]].adev(tau))
+
     out: dict = {"kind": kind, "axis": axis, "size": size}
     if kind == "sinusoid":
         f = 10 ** rng.uniform(-2.5, -0.5)
@@ -305,6 +310,26 @@ def add_effect(
         out |= {"axis": "accel_x" if abs(np.cos(phi)) >= abs(np.sin(phi)) else "accel_y",
                 "axes": ["accel_x", "accel_y"], "time_s": at, "duration_s": length,
                 "theta_rad": theta, "azimuth_rad": phi}  # fmt: skip
+    elif kind == "shift":
+        # the unit leans by theta at a random time and stays (1 s to lean): gravity's
+        # projection steps by g sin(theta) on accel x and y (cos/sin of the azimuth) and by
+        # g (cos(theta) - 1) on z; the gyros see the 1 s rotation.  The larger of the x/y steps
+        # is size x that axis' ADEV at T/10 (as a bias step's), the other a random share of it
+        at, phi = rng.uniform(0.2, 0.8) * duration, rng.uniform(0, 2 * np.pi)
+        main = 3 if abs(np.cos(phi)) >= abs(np.sin(phi)) else 4
+        lean_of = max(abs(np.cos(phi)), abs(np.sin(phi)))
+        theta = float(np.arcsin(min(1.0, amp_of(main, duration / 10) / (9.80665 * lean_of))))
+        lean = np.clip((t - at) / 1.0, 0, 1)
+        rate = (np.diff(lean, prepend=0.0) / tau0) * theta
+        y[:, 3] += 9.80665 * np.sin(theta * lean) * np.cos(phi)
+        y[:, 4] += 9.80665 * np.sin(theta * lean) * np.sin(phi)
+        y[:, 5] += 9.80665 * (np.cos(theta * lean) - 1)
+        y[:, 0] += rate * np.sin(phi)
+        y[:, 1] -= rate * np.cos(phi)
+        steps = {"accel_x": 9.80665 * np.sin(theta) * np.cos(phi),
+                 "accel_y": 9.80665 * np.sin(theta) * np.sin(phi)}  # fmt: skip
+        out |= {"axis": AXES[main], "axes": ["accel_x", "accel_y"], "time_s": at,
+                "theta_rad": theta, "azimuth_rad": phi, "steps": steps}  # fmt: skip
     elif kind == "prefilter":
         # the sensor's digital low-pass on everything the axis outputs (before the LSB
         # rounding): a moving average, a Bartlett window (two moving averages) or a first-order

@@ -61,6 +61,7 @@ EXPECTED = {
     "warmup": {"rate_ramp"},
     "event": {"event"},  # a disturbance event found jointly on the axes (report.json events)
     "tilt": {"event"},
+    "shift": {"bias_step"},  # a lasting tilt: steps on accel x and y (the larger one's axis)
     "outliers": {"outliers", "spike"},
     "prefilter": {"prefilter", "prefilter term"},
     "lowpass": {"prefilter", "prefilter term"},

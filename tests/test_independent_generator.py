@@ -86,6 +86,26 @@ def test_a_thermal_lag_is_the_temperature_through_a_first_order_lag():
     assert np.count_nonzero(np.abs(y - clean).max(axis=0) > 0) == 1
 
 
+def test_a_shift_steps_gravity_on_both_horizontal_accelerometers_and_stays():
+    """``shift``: a lasting tilt.  After the 1 s lean accel x and y stand g·sin θ·(cos φ, sin φ)
+    above their clean values, as the truth's ``steps`` say; the larger one is size × its axis'
+    ADEV at T/10 (a bias step's size) on the named axis; z moves by g(cos θ − 1) (~θ/2 of it);
+    before the lean nothing differs."""
+    y, _, truth = gen.generate(0.5, 10.0, 6, "shift", 10.0)
+    clean, _, _ = gen.generate(0.5, 10.0, 6)
+    e, diff = truth.effect, y - clean
+    t = np.arange(len(y)) * 0.1
+    after, before = t >= e["time_s"] + 1.0, t < e["time_s"]
+    for b, name in ((3, "accel_x"), (4, "accel_y")):
+        np.testing.assert_allclose(diff[after, b], e["steps"][name], rtol=1e-9)
+        assert not diff[before, b].any()
+    main = e["axis"]
+    assert abs(e["steps"][main]) == max(abs(v) for v in e["steps"].values())
+    assert abs(e["steps"][main]) == pytest.approx(10.0 * truth.noise[main].adev(180.0), rel=1e-9)
+    z = 9.80665 * (np.cos(e["theta_rad"]) - 1)  # ~θ/2 of the larger step: 1e-4 of it here
+    np.testing.assert_allclose(diff[after, 5], z, rtol=1e-6)
+
+
 def test_bag_decodes_to_the_generated_values(tmp_path: Path):
     y, temp, _ = gen.generate(20 / 3600, 50.0, 4)
     gen.write_bag(tmp_path / "bag", y, temp, 50.0, 1_700_000_000_000_000_000)
