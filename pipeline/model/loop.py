@@ -504,7 +504,7 @@ def goodness(
         error=fit.deviance / fit.dof,
         deviance=fit.deviance,
         dof=fit.dof,
-        p_value=float((1 + np.sum(boot >= fit.deviance)) * P_VALUE_FLOOR),
+        p_value=float((1 + np.sum(boot >= fit.deviance)) / (N_BOOT + 1)),
         z=z,
         max_abs_z=float(abs(z[k])),
         tau_max_abs_z=float(tau[k]),
