@@ -76,7 +76,7 @@ def coincident_step_warnings(axes: Mapping[str, AxisResult]) -> list[str]:
     The steps stay corrected per axis: the warning says they are one event of the unit."""
     steps = sorted(
         (
-            (*effect.intervals.get("time_s", [effect.params["time_s"]] * 2), name, effect)
+            (*effect.intervals["time_s"], name, effect)
             for name, axis in axes.items()
             if axis.loop is not None
             for effect in axis.loop.accepted

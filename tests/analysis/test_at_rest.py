@@ -106,6 +106,23 @@ def test_steps_apart_or_on_one_axis_are_no_warning() -> None:
         accel_y=[_step(1020.0, 1010.5, 1030.0, 0.02)],  # starts after accel_x's ends
     )
     assert coincident_step_warnings(apart) == []
+    pair = _looped(  # two steps a few seconds apart, inside each other's interval: one instant
+        accel_x=[_step(1000.0, 990.0, 1010.0, 0.02)],
+        accel_y=[_step(1004.0, 995.0, 1012.0, -0.01)],
+    )
+    (warning,) = coincident_step_warnings(pair)
+    assert warning.startswith(
+        "bias steps at the same instant on several axes, 1000-1004 s [990, 1012]"
+    )
+    three = _looped(  # the span from the first time to the last, not to the second
+        gyro_x=[_step(1000.0, 990.0, 1010.0, 1e-4)],
+        gyro_y=[_step(1000.0, 992.0, 1010.0, 1e-4)],
+        gyro_z=[_step(1006.0, 996.0, 1016.0, 1e-4)],
+    )
+    (warning,) = coincident_step_warnings(three)
+    assert warning.startswith(
+        "bias steps at the same instant on several axes, 1000-1006 s [990, 1016]"
+    )
     one_axis = _looped(accel_x=[_step(1000.0, 990.0, 1010.0, 0.02), _step(1005.0, 1000, 1010, 1)])
     assert coincident_step_warnings(one_axis) == []
     assert coincident_step_warnings({"gyro_x": SimpleNamespace(loop=None, unit="rad/s")}) == []
