@@ -190,6 +190,19 @@ def _sampled_resonance(
     return out
 
 
+def _lean(y: np.ndarray, lean: np.ndarray, theta: float, phi: float, tau0: float) -> None:
+    """Add to the (n, 6) rate ``y`` in place a lean of the unit by ``theta`` × ``lean`` (rad;
+    ``lean`` the fraction leant at each sample, 0..1) about the horizontal axis at azimuth
+    ``phi``: gravity's projection on accel x and y, g sin(θ·lean) (cos/sin φ), and on z,
+    g (cos(θ·lean) − 1); the gyros x and y see the rotation's rate."""
+    rate = (np.diff(lean, prepend=0.0) / tau0) * theta
+    y[:, 3] += 9.80665 * np.sin(theta * lean) * np.cos(phi)
+    y[:, 4] += 9.80665 * np.sin(theta * lean) * np.sin(phi)
+    y[:, 5] += 9.80665 * (np.cos(theta * lean) - 1)
+    y[:, 0] += rate * np.sin(phi)
+    y[:, 1] -= rate * np.cos(phi)
+
+
 def add_effect(
     y: np.ndarray,
     temp: np.ndarray,
@@ -301,12 +314,7 @@ def add_effect(
         worst = max(truth_noise[AXES[b]].adev(length) for b in (3, 4))
         theta = float(np.arcsin(min(1.0, size * 3 * worst / 9.80665)))
         lean = np.clip((t - at) / 1.0, 0, 1) - np.clip((t - at - length) / 1.0, 0, 1)
-        rate = (np.diff(lean, prepend=0.0) / tau0) * theta
-        y[:, 3] += 9.80665 * np.sin(theta * lean) * np.cos(phi)
-        y[:, 4] += 9.80665 * np.sin(theta * lean) * np.sin(phi)
-        y[:, 5] += 9.80665 * (np.cos(theta * lean) - 1)
-        y[:, 0] += rate * np.sin(phi)
-        y[:, 1] -= rate * np.cos(phi)
+        _lean(y, lean, theta, phi, tau0)
         out |= {"axis": "accel_x" if abs(np.cos(phi)) >= abs(np.sin(phi)) else "accel_y",
                 "axes": ["accel_x", "accel_y"], "time_s": at, "duration_s": length,
                 "theta_rad": theta, "azimuth_rad": phi}  # fmt: skip
@@ -320,12 +328,7 @@ def add_effect(
         lean_of = max(abs(np.cos(phi)), abs(np.sin(phi)))
         theta = float(np.arcsin(min(1.0, amp_of(main, duration / 10) / (9.80665 * lean_of))))
         lean = np.clip((t - at) / 1.0, 0, 1)
-        rate = (np.diff(lean, prepend=0.0) / tau0) * theta
-        y[:, 3] += 9.80665 * np.sin(theta * lean) * np.cos(phi)
-        y[:, 4] += 9.80665 * np.sin(theta * lean) * np.sin(phi)
-        y[:, 5] += 9.80665 * (np.cos(theta * lean) - 1)
-        y[:, 0] += rate * np.sin(phi)
-        y[:, 1] -= rate * np.cos(phi)
+        _lean(y, lean, theta, phi, tau0)
         steps = {"accel_x": 9.80665 * np.sin(theta) * np.cos(phi),
                  "accel_y": 9.80665 * np.sin(theta) * np.sin(phi)}  # fmt: skip
         out |= {"axis": AXES[main], "axes": ["accel_x", "accel_y"], "time_s": at,
