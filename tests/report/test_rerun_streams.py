@@ -18,9 +18,16 @@ from imupipe.report.rerun_view import write_rrd
 
 
 def _stream_threads() -> int:
-    """Threads of this process that rerun starts per recording stream (Linux task names)."""
-    names = (Path(f"/proc/self/task/{t}/comm").read_text() for t in os.listdir("/proc/self/task"))
-    return sum(n.startswith(("RecordingStream", "ChunkBatcher")) for n in names)
+    """Threads of this process that rerun starts per recording stream (Linux task names); a
+    thread that ends between the listing and the read of its name is not counted."""
+    count = 0
+    for task in os.listdir("/proc/self/task"):
+        try:
+            name = Path(f"/proc/self/task/{task}/comm").read_text()
+        except FileNotFoundError:
+            continue
+        count += name.startswith(("RecordingStream", "ChunkBatcher"))
+    return count
 
 
 def test_recordings_written_one_after_another_leave_no_stream_behind(
