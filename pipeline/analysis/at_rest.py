@@ -25,6 +25,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from imupipe.analysis.events import overlapping_groups
 from imupipe.analysis.results import AxisResult
 from imupipe.units import STANDARD_GRAVITY
 
@@ -74,22 +75,17 @@ def coincident_step_warnings(axes: Mapping[str, AxisResult]) -> list[str]:
     step, their 95 % time intervals (``time_s``, s from the analysed start) overlapping
     (chained: a step overlapping one of the group joins it); the sizes in each axis' SI unit.
     The steps stay corrected per axis: the warning says they are one event of the unit."""
-    steps = sorted(
-        (
-            (*effect.intervals["time_s"], name, effect)
-            for name, axis in axes.items()
-            if axis.loop is not None
-            for effect in axis.loop.accepted
-            if effect.kind == STEP_KIND
-        ),
-        key=lambda step: step[:3],
-    )
-    groups: list[list[tuple]] = []
-    for step in steps:
-        if groups and step[0] <= max(s[1] for s in groups[-1]):
-            groups[-1].append(step)
-        else:
-            groups.append([step])
+    steps = [
+        (*effect.intervals["time_s"], name, effect)
+        for name, axis in axes.items()
+        if axis.loop is not None
+        for effect in axis.loop.accepted
+        if effect.kind == STEP_KIND
+    ]
+    groups = [
+        [steps[i] for i in members]
+        for members in overlapping_groups([s[0] for s in steps], [s[1] for s in steps])
+    ]
     warnings = []
     for group in groups:
         if len({name for _, _, name, _ in group}) < 2:

@@ -59,6 +59,7 @@ from math import comb
 from typing import Literal
 
 import numpy as np
+import numpy.typing as npt
 from scipy import optimize, special
 
 from imupipe.analysis.condition import fill_runs
@@ -366,18 +367,16 @@ def _scales(x: np.ndarray, dt: float) -> list[_Scale]:
     return out
 
 
-def _components(spans: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
-    """Overlapping or touching spans (k, 2) merged: (first, stop, indices of the spans)."""
-    order = np.argsort(spans[:, 0], kind="stable")
-    out: list[tuple[int, int, list[int]]] = []
-    for i in order:
-        a, b = int(spans[i, 0]), int(spans[i, 1])
-        if out and a <= out[-1][1]:
-            first, stop, members = out[-1]
-            out[-1] = (first, max(stop, b), [*members, int(i)])
-        else:
-            out.append((a, b, [int(i)]))
-    return [(a, b, np.array(m)) for a, b, m in out]
+def overlapping_groups(lo: npt.ArrayLike, hi: npt.ArrayLike) -> list[np.ndarray]:
+    """The intervals [lo, hi] merged where they overlap or touch, chained (an interval that
+    reaches any of a group's joins it): each group's indices, in the order of ``lo`` (ties in
+    the order given)."""
+    order = np.argsort(lo, kind="stable")
+    if not order.size:
+        return []
+    reach = np.maximum.accumulate(np.asarray(hi)[order])
+    starts_group = np.asarray(lo)[order][1:] > reach[:-1]
+    return np.split(order, np.flatnonzero(starts_group) + 1)
 
 
 def _best_box(e: np.ndarray, v: np.ndarray) -> tuple[int, int]:
@@ -459,7 +458,8 @@ def find_events(
     lengths_a = np.array(lengths)
     tested = {s.length: (int(s.starts[0]), int(s.starts[-1]) + s.length) for s in scales}
     events = []
-    for first, stop, members in _components(spans_a):
+    for members in overlapping_groups(spans_a[:, 0], spans_a[:, 1]):
+        first, stop = int(spans_a[members[0], 0]), int(spans_a[members, 1].max())
         zmax = np.max(np.abs(zs_a[members]), axis=0)
         touched = np.flatnonzero(np.max(ratios_a[members], axis=0) > 1)
         hull = _hull(spans_a[members], lengths_a[members], tested, len(x))

@@ -542,3 +542,16 @@ def test_the_tail_scale_needs_ten_windows_beyond_its_quantile_once_sustained_one
     assert ev._robust_scale(mixed) == pytest.approx(
         np.sqrt(np.mean(clipped**2) / ev.WINSOR_VAR), rel=1e-12
     )
+
+
+def test_overlapping_intervals_are_grouped_chained_and_touching() -> None:
+    """[lo, hi] intervals given out of order: touching ends join (5's [5, 7] and 0's [7, 9]);
+    an interval reaching any earlier member of a group joins it (4's [3, 4.5] starts after 3's
+    [1, 2] ends, within 1's [0, 4]); ties in lo keep the order given; a gap of any size (2's
+    [20, 21]) starts a group."""
+    lo = [7.0, 0.0, 20.0, 1.0, 3.0, 5.0, 7.0 + 1e-9]
+    hi = [9.0, 4.0, 21.0, 2.0, 4.5, 7.0, 8.0]
+    groups = [g.tolist() for g in ev.overlapping_groups(lo, hi)]
+    assert groups == [[1, 3, 4], [5, 0, 6], [2]]
+    assert ev.overlapping_groups([], []) == []
+    assert [g.tolist() for g in ev.overlapping_groups([3, 3, 3], [4, 4, 4])] == [[0, 1, 2]]
