@@ -209,7 +209,9 @@ def record(
             "'rerun --connect rerun+http://127.0.0.1:PORT/proxy'."
         ),
     ] = False,
-    view_port: Annotated[int, typer.Option(min=1, max=65535)] = 9876,
+    view_port: Annotated[
+        int, typer.Option(min=1, max=65535, help="Port of --serve, on 127.0.0.1.")
+    ] = 9876,
     quiet: Quiet = False,
 ) -> None:
     """Record ADIS16364 frames into an MCAP file (default: the paper's 12 h static test)."""
@@ -259,7 +261,13 @@ def info(path: Annotated[Path, typer.Argument(help="MCAP file or rosbag2 directo
 
 @app.command()
 def analyze(
-    path: Annotated[Path, typer.Argument(help="MCAP file (ours or a ROS 2 bag's).")],
+    path: Annotated[
+        Path,
+        typer.Argument(
+            help="MCAP file (ours or a ROS 2 bag's), or a rosbag2 directory (MCAP or SQLite "
+            "storage)."
+        ),
+    ],
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Output folder (default: FILE.imupipe/).")
     ] = None,
@@ -267,7 +275,9 @@ def analyze(
         str | None,
         typer.Option(help="IMU topic when there are several; 'all': one report per topic."),
     ] = None,
-    taus_per_decade: Annotated[int, typer.Option(min=4, max=100)] = 10,
+    taus_per_decade: Annotated[
+        int, typer.Option(min=4, max=100, help="Points of the Allan curve per decade of tau.")
+    ] = 10,
     gaps: Annotated[
         GapPolicy,
         typer.Option(
@@ -486,7 +496,7 @@ def fleet(
     datasheet: Annotated[
         Path | None, typer.Option(help="Datasheet TOML to check every unit and the lot against.")
     ] = None,
-    taus_per_decade: Annotated[int, typer.Option(min=4, max=100)] = 10,
+    taus_per_decade: Annotated[int, typer.Option(min=4, max=100, help="As imupipe analyze.")] = 10,
     gaps: Annotated[GapPolicy, typer.Option(help="As imupipe analyze.")] = GapPolicy.auto,
     rrd: Annotated[bool, typer.Option(help="Write each unit's recording.rrd and fleet.rrd.")] = (
         True
@@ -561,7 +571,7 @@ def demo(
         "imupipe-demo"
     ),
     duration: Annotated[str, typer.Option(help="Length of the simulated recording.")] = "12h",
-    seed: Annotated[int, typer.Option()] = 0,
+    seed: Annotated[int, typer.Option(help="Simulator seed (same seed, same bytes).")] = 0,
     quiet: Quiet = False,
 ) -> None:
     """The paper's experiment end to end: record 12 h of a virtual ADIS16364, then analyse it."""

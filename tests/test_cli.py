@@ -12,7 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import typer
 
+from imupipe.cli import app
 from imupipe.device.adis16364 import FrameBlock, config_for_rate
 from imupipe.errors import ImupipeError
 from imupipe.io.mcap_bulk import BulkWriter
@@ -307,3 +309,15 @@ def test_console_exit_status_of_no_code_and_of_a_message(how: str, status: int, 
         [sys.executable, "-c", EXITS_SCRIPT, how], capture_output=True, text=True, timeout=120
     )
     assert (proc.returncode, proc.stderr) == (status, said)
+
+
+def test_every_argument_and_option_says_what_it_is() -> None:
+    """``imupipe COMMAND --help`` explains every parameter of every command (two had none)."""
+    group = typer.main.get_command(app)
+    silent = [
+        f"{name} {param.name}"
+        for name, command in group.commands.items()
+        for param in command.params
+        if not (getattr(param, "help", None) or "").strip()
+    ]
+    assert silent == []
