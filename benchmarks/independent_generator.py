@@ -228,11 +228,11 @@ def add_effect(
     axis = AXES[a]
     noise = truth_noise[axis]
 
-    def amp(tau: float) -> float:
-        return float(size * noise.adev(tau))
-
     def amp_of(b: int, tau: float) -> float:
         return float(size * truth_noise[AXES[b]].adev(tau))
+
+    def amp(tau: float) -> float:
+        return amp_of(a, tau)
 
     out: dict = {"kind": kind, "axis": axis, "size": size}
     if kind == "sinusoid":

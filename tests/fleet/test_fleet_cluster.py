@@ -5,7 +5,6 @@ with one worker killed mid-run.  Every server is bound to 127.0.0.1 and stopped 
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import re
@@ -217,9 +216,6 @@ def test_existing_scheduler_survives_a_killed_worker(tmp_path, schema_errors):
         for p in reversed(procs):
             if p.poll() is None:
                 p.send_signal(signal.SIGINT)
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    p.wait(timeout=30)
-        for p in procs:
             try:
                 p.wait(timeout=30)
             except subprocess.TimeoutExpired:
