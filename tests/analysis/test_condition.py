@@ -61,6 +61,15 @@ def test_an_axis_beyond_the_float_range_names_its_largest_magnitude() -> None:
     assert unanalysable(y) == "reaches 3e+101, beyond what float64 Allan sums hold (1e100)"
 
 
+def test_a_constant_axis_with_a_few_glitches_names_how_many() -> None:
+    """0.25 in every sample but one above it and one below (of 5000: fewer than 1 in 1000): no
+    noise, said with the count of glitches (both directions: a value differs from the usual
+    one whether it is higher or lower)."""
+    y = np.full(5000, 0.25)
+    y[1000], y[3000] = 0.5, -1.0
+    assert unanalysable(y) == "is constant but for 2 sample(s) (glitches?)"
+
+
 def test_clean_recording_is_one_segment() -> None:
     s = condition(recording())
     assert len(s.segments) == 1 and s.segment.frames == 1000
@@ -531,6 +540,25 @@ def test_a_block_of_stamps_that_do_not_advance_is_no_rate() -> None:
     assert s.nominal_rate_hz == 100.0
     assert not any("sample rate changes" in w for w in s.warnings)
     assert s.counts["duplicate_stamps"] == 4999
+
+
+def test_a_rate_switch_early_in_a_block_is_found_to_the_row() -> None:
+    """200 Hz for 3100 frames, then 100 Hz: the switch lies 28 steps into a block of 256 (steps
+    3072..3327), whose median step is already the new rate's.  The 100 Hz part starts at frame
+    3100 exactly, so no 200 Hz row is read as if it were at 100 Hz (which the measured mean
+    rate would show)."""
+
+    def stamps(a):
+        a[:3100] = np.arange(3100) * 5_000_000
+        a[3100:] = a[3099] + np.arange(1, len(a) - 3099) * 10_000_000
+
+    rec = recording(n=10_000, stamp_ns=stamps)
+    s = condition(replace(rec, device={}))
+    assert s.warnings == (
+        "the sample rate changes 1 time(s) (200 Hz from frame 0, 100 Hz from frame 3100): "
+        "analysing the longest part at one rate, frames 3100..9999 (100 Hz)",
+    )
+    assert s.rows == slice(3100, 10_000) and s.tau0_s == pytest.approx(0.01, rel=1e-9)
 
 
 def test_the_masked_grid_of_the_part_at_one_rate_reads_that_parts_rows() -> None:

@@ -155,6 +155,22 @@ def test_frames_lost_often_under_a_drifting_clock_are_each_counted() -> None:
     assert np.count_nonzero(s.grid_index != frame - frame[0]) < 0.002 * len(frame)
 
 
+@pytest.mark.parametrize(("apart", "gaps"), [(16, 1), (17, 2)])
+def test_frames_lost_a_burst_apart_are_one_gap(apart: int, gaps: int) -> None:
+    """Every other stamp 0.3 periods late, frames 1000 and 1001 + ``apart`` lost: the second
+    loss lies ``apart`` rows after the first.  Losses up to BURST_ROWS (16) rows apart are one
+    gap (stamped in bursts, the floor passes one gap's levels up to a burst apart): 2 frames
+    missing, both places at the first; further apart, two gaps, each at its own place."""
+    lost = (1000, 1001 + apart)
+    frame = np.setdiff1d(np.arange(2002), lost)
+    late = np.where(np.arange(2000) % 2, 0.3, 0.0)  # scatter 44 %: jittery, placed by envelope
+    s = condition(imu_recording(((frame + late) * PERIOD_NS).astype(np.int64)))
+    assert f"{gaps} gap(s) in time or frame counter (2 frames missing)" in s.warnings
+    assert s.samples == 2002
+    places = [1000, 1001] if gaps == 1 else list(lost)
+    np.testing.assert_array_equal(np.flatnonzero(s.excluded), places)
+
+
 def test_two_frames_stamped_alike_are_not_a_burst() -> None:
     """Messages of two frame_ids stamped in pairs are two IMUs on one topic, not one IMU's
     bursts: the steps are cut as before (no scatter warning)."""
