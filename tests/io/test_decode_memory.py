@@ -11,6 +11,7 @@ what the whole decode gives for those columns.
 
 from __future__ import annotations
 
+import itertools
 import os
 import subprocess
 import sys
@@ -196,3 +197,38 @@ def test_adis_subsets_equal_the_whole_decode(
         assert sorted(part.columns) == sorted(columns)
         expected = f.with_columns(nonfinite=pl.repeat(0, f.height, dtype=pl.UInt8, eager=True))
         assert part.equals(expected.select(part.columns)), columns
+
+
+def test_a_topic_is_decoded_16_chunks_or_32768_messages_at_a_time(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The chunks of a topic wait and are decoded together once they hold
+    :data:`imupipe.io.decode._DECODE_ROWS` (32 768) messages or are
+    :data:`~imupipe.io.decode._DECODE_BATCHES` (16) chunks, the rest at the end of the file:
+    neither chunk by chunk (numpy's calls per batch then cost a third of the decode's CPU on a
+    busy bag) nor a sparse topic's whole file at once (memory).  20 chunks of 100 messages,
+    then 3 of 20 000: 16 × 100, then 4 × 100 + 2 × 20 000 (past 32 768), then the last."""
+    sizes: list[int] = []
+    decode_imu = dec._decode_imu
+
+    def counted(m, out, columns) -> None:
+        sizes.append(len(m))
+        decode_imu(m, out, columns)
+
+    monkeypatch.setattr(dec, "_decode_imu", counted)
+    chunks = [100] * 20 + [20_000] * 3
+    n = sum(chunks)
+    stamps = T0_NS + np.arange(n, dtype=np.int64) * 1_000_000
+    gyro = np.zeros((n, 3))
+    gyro[:, 2] = np.arange(n)
+    payloads = imu_payloads(stamps, gyro, np.zeros((n, 3)))
+    path = tmp_path / "f.mcap"
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        imu = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        for start, stop in itertools.pairwise([0, *itertools.accumulate(chunks)]):
+            w.write_chunk(imu, stamps[start:stop], payloads[start:stop])
+        w.finish()
+    rec = decode(path, columns=frozenset({"gyro_z"}))
+    assert sizes == [1_600, 400 + 40_000, 20_000]
+    np.testing.assert_array_equal(rec.frames["gyro_z"].to_numpy(), np.arange(n))

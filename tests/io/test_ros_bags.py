@@ -328,6 +328,33 @@ def test_a_stray_among_fewer_messages_than_its_window(tmp_path: Path) -> None:
     np.testing.assert_array_equal(rec.frames["t_s"].to_numpy(), np.arange(6) / 100)
 
 
+def test_strays_at_both_ends_take_the_log_time_less_the_latency(tmp_path: Path) -> None:
+    """Stamps on the host's clock (received 3 ms after them, 100 Hz), the first and the last
+    left at 0 (a driver stamping before its time was set, and as it stopped): each stray at an
+    end has no good neighbour on one side and takes its log time less its neighbours' median
+    latency, 3 ms: t_s is the true time to the nanosecond, and no clock reset is left."""
+    n = 50
+    true_ns = T0 + np.arange(n, dtype=np.int64) * 10_000_000
+    header = true_ns.copy()
+    header[[0, -1]] = 0
+    path = tmp_path / "f.mcap"
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
+        w.write_chunk(
+            cid, true_ns + 3_000_000, imu_payloads(header, np.zeros((n, 3)), np.zeros((n, 3)))
+        )
+        w.finish()
+    rec = decode(path)
+    assert rec.time_source == "header.stamp"
+    np.testing.assert_array_equal(rec.frames["t_s"].to_numpy(), np.arange(n) / 100)
+    np.testing.assert_array_equal(rec.frames["stamp_ns"].to_numpy(), header)
+    assert rec.warnings == [
+        "2 message(s) have a header.stamp more than 1 s off their neighbours' (message 0 by "
+        "-1.7e+09 s, …): each is replaced by its neighbours' stamps, interpolated"
+    ]
+
+
 def test_the_median_of_nanoseconds_is_exact() -> None:
     """The offsets that place runs and strays: exact int64 medians (the upper one of an even
     count), not through float64 (256 ns apart at ~1.7e18 ns)."""
@@ -423,3 +450,12 @@ def test_a_repeat_across_decoded_batches_is_found(tmp_path: Path) -> None:
     rec = decode(path)
     np.testing.assert_array_equal(rec.frames["gyro_y"].to_numpy(), np.arange(n))
     assert rec.warnings[0].startswith("1 message(s) repeat the one before them byte for byte")
+
+
+def test_the_frame_ids_of_a_topic_are_its_headers_as_written(tmp_path: Path) -> None:
+    """``frame_ids`` (the names conditioning shows when several sensors share a topic): the
+    distinct header.frame_id values of the topic's first messages, each the bytes after its
+    u32 length without the NUL, sorted; an empty frame_id is the empty name."""
+    bag = tmp_path / "bag"
+    write_bag(bag, 20, frame_ids=("varying",), temperature=False)  # "", "f", ... "ffff"
+    assert decode(bag).frame_ids == ("", "f", "ff", "fff", "ffff")
