@@ -24,6 +24,7 @@ from imupipe.analysis.results import (
 )
 from imupipe.device.frame_schema import SCHEMA_NAME as ADIS16364_SOURCE
 from imupipe.escape import printable
+from imupipe.model.loop import BOOT_EXCEEDANCES
 from imupipe.report.datasheet import Datasheet, adis16364
 from imupipe.report.exports import render as render_export
 from imupipe.report.exports import write_exports
@@ -339,9 +340,11 @@ def report_markdown(
         md += [
             "## Closed loop: model error before and after",
             "",
-            f"Error: {ERROR_MEASURE}. p-value: the share of {round(1 / floor) - 1} "
-            "parametric-bootstrap replicates of the model whose deviance reaches the fit's "
-            f"(≤ {_fmt(floor)}: none did, and the true p-value is at most that). Besides its "
+            f"Error: {ERROR_MEASURE}. p-value: the share of parametric-bootstrap replicates "
+            "of the model whose deviance reaches the fit's, drawn 200 at a time until "
+            f"{BOOT_EXCEEDANCES} reach it or {round(1 / floor) - 1} are drawn (Besag & "
+            f"Clifford 1991; ≤ {_fmt(floor)}: none did, and the true p-value is at most that). "
+            "Besides its "
             "own test, an effect is accepted only where the model's deviance falls by at least "
             "χ²₁(0.95) = 3.84 in Allan space or in the time domain (−2 ln L of the whitened "
             "series) and the time-domain one does not rise by more than that (a linear ramp, "

@@ -56,6 +56,7 @@ from imupipe.model.loop import (
     aux_block_means,
     close_loop,
     goodness,
+    settled,
 )
 from imupipe.stats.allan import allan_curves
 from imupipe.vocab import CHI2_95
@@ -442,6 +443,36 @@ def test_goodness_p_value_is_the_bootstrap_share_at_or_above_the_deviance():
     avar = _avar_with({})
     assert goodness(_fit(1e9), TAU, avar, EDF).p_value == 1 / 201
     assert goodness(_fit(0.0), TAU, avar, EDF).p_value == 1.0
+
+
+def test_the_reported_p_value_draws_on_until_ten_replicates_reach_the_deviance():
+    """A deviance at the 0.99 quantile of its bootstrap (χ² of 10 dof, p ≈ 0.01): 200
+    replicates leave it within their Monte Carlo error of 0.01; :func:`settled` draws 200 at a
+    time until 10 replicates reach it, each replicate the one goodness' own stream gives."""
+    avar = _avar_with({})
+    fit = _fit(float(stats.chi2.ppf(0.99, 10)))
+    first = goodness(fit, TAU, avar, EDF)
+    assert first.replicates == 200 and first.p_value == (1 + first.exceedances) / 201
+    assert first.exceedances < loop.BOOT_EXCEEDANCES
+    done = settled(first, fit, EDF)
+    assert done.exceedances >= loop.BOOT_EXCEEDANCES
+    assert done.replicates % 200 == 0 and 200 < done.replicates <= 2000
+    assert done.p_value == (1 + done.exceedances) / (done.replicates + 1)
+    assert done.p_value == pytest.approx(0.01, abs=0.006)  # ±3 Monte Carlo errors of ~1000
+    # the first 200 replicates are goodness' own: drawing again from the start counts the same
+    again = loop._replicate_deviances(fit, EDF, 0, done.replicates) >= fit.deviance
+    assert int(again[:200].sum()) == first.exceedances and int(again.sum()) == done.exceedances
+    assert int(again[: done.replicates - 200].sum()) < loop.BOOT_EXCEEDANCES  # stops at 10
+
+
+def test_a_clear_p_value_keeps_its_200_replicates_and_none_reaching_reads_the_floor():
+    avar = _avar_with({})
+    typical = goodness(_fit(float(stats.chi2.ppf(0.5, 10))), TAU, avar, EDF)
+    assert settled(typical, _fit(float(stats.chi2.ppf(0.5, 10))), EDF) is typical
+    never = _fit(1e9)
+    floor = settled(goodness(never, TAU, avar, EDF), never, EDF)
+    assert (floor.replicates, floor.exceedances) == (2000, 0)
+    assert floor.p_value == loop.P_VALUE_FLOOR == 1 / 2001
 
 
 @pytest.mark.parametrize(("quantile", "lo", "hi"), [(0.5, 0.35, 0.65), (0.9, 0.03, 0.2)])

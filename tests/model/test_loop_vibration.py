@@ -616,7 +616,7 @@ def test_a_quiet_sensor_under_a_line_above_the_fitted_range_closes_its_loop():
     curve = allan_curves([y], tau0)[0]
     looped = close_loop(AxisSignals("gyro_x", "gyro", y, tau0, None, None), curve)
     assert looped.terms_before.random_walk.value is None  # N: a bound (fitted 0)
-    assert looped.before.p_value == pytest.approx(1 / 201)  # rejected: the line is unmodelled
+    assert looped.before.p_value == pytest.approx(1 / 2001)  # rejected: none of 2000 replicates
     assert np.isfinite(looped.time_error_before) and looped.time_error_before > 0
     (tone,) = looped.accepted
     assert tone.kind == "sinusoid"

@@ -74,7 +74,7 @@ def _curve() -> AllanCurve:
 
 def _loop(terms_after: ieee952.NoiseTerms) -> LoopResult:
     z = np.zeros_like(TAU)
-    before = Goodness(4.23456, 40.0, 40, 1 / 201, z, 5.98765, 100.0, 3.14159, 4, (0.01, 200.0))
+    before = Goodness(4.23456, 40.0, 40, 1 / 2001, z, 5.98765, 100.0, 3.14159, 4, (0.01, 200.0))
     after = Goodness(1.034567, 30.0, 38, 0.41234, z, 2.21212, 0.1, 0.912345, 0, (0.001, 200.0))
     effect = AcceptedEffect(
         kind="temperature",
@@ -228,7 +228,7 @@ def test_loop_before_after_rounded_in_order(md: str) -> None:
     assert cells == [
         "accel_x",
         "4.235 → 1.035",  # error
-        "≤ 0.004975 → 0.4123",  # p-value: no bootstrap replicate reached the deviance before
+        "≤ 0.0004998 → 0.4123",  # p-value: no bootstrap replicate reached the deviance before
         "3.142 → 0.9123",  # rms z
         "5.988 → 2.212 (τ 100 → 0.1 s)",  # max |z| at tau
         "0.01–200 → 0.001–200",  # the fitted tau, before → after
@@ -237,8 +237,9 @@ def test_loop_before_after_rounded_in_order(md: str) -> None:
     ]
     assert sum(ln.startswith("| gyro_") for ln in md.split("## Closed loop")[1].splitlines()) == 0
     assert (
-        "p-value: the share of 200 parametric-bootstrap replicates of the model whose deviance "
-        "reaches the fit's (≤ 0.004975: none did, and the true p-value is at most that). "
+        "p-value: the share of parametric-bootstrap replicates of the model whose deviance "
+        "reaches the fit's, drawn 200 at a time until 10 reach it or 2000 are drawn (Besag & "
+        "Clifford 1991; ≤ 0.0004998: none did, and the true p-value is at most that). "
         "Besides its own test, an effect is accepted only where the model's deviance falls by "
         "at least χ²₁(0.95) = 3.84 in Allan space or in the time domain"
     ) in md
