@@ -459,10 +459,29 @@ def test_the_reported_p_value_draws_on_until_ten_replicates_reach_the_deviance()
     assert done.replicates % 200 == 0 and 200 < done.replicates <= 2000
     assert done.p_value == (1 + done.exceedances) / (done.replicates + 1)
     assert done.p_value == pytest.approx(0.01, abs=0.006)  # ±3 Monte Carlo errors of ~1000
+    assert (done.replicates, done.exceedances) == (800, 11)  # the seeded stream's: reproducible
     # the first 200 replicates are goodness' own: drawing again from the start counts the same
     again = loop._replicate_deviances(fit, EDF, 0, done.replicates) >= fit.deviance
     assert int(again[:200].sum()) == first.exceedances and int(again.sum()) == done.exceedances
     assert int(again[: done.replicates - 200].sum()) < loop.BOOT_EXCEEDANCES  # stops at 10
+
+
+def test_the_draws_stop_at_the_batch_where_ten_reach_the_deviance(monkeypatch):
+    """Replicates whose deviance equals the fit's reach it (≥): with 5 such ties in every
+    batch of 200, goodness counts 5 of 200 and settled stops at the batch that brings 10, after
+    400 replicates: p = 11/401 (drawing on while 10 or fewer reach it would read 16/601)."""
+    fit = _fit(30.0)
+
+    def deviances(fit_, edf, start, count):
+        out = np.full(count, 1.0)
+        out[:5] = fit_.deviance  # ties: as large as the fit's deviance
+        return out
+
+    monkeypatch.setattr(loop, "_replicate_deviances", deviances)
+    first = goodness(fit, TAU, _avar_with({}), EDF)
+    assert (first.replicates, first.exceedances, first.p_value) == (200, 5, 6 / 201)
+    done = settled(first, fit, EDF)
+    assert (done.replicates, done.exceedances, done.p_value) == (400, 10, 11 / 401)
 
 
 def test_a_clear_p_value_keeps_its_200_replicates_and_none_reaching_reads_the_floor():
