@@ -1067,3 +1067,38 @@ def test_two_imus_with_one_frame_id_on_one_topic_are_warned(
         "one sensor's are alike): several IMUs publishing on one topic under one "
         "header.frame_id? Their samples are analysed as one stream"
     )
+
+
+def test_a_devices_counted_frames_alternating_are_one_sensor_not_two(
+    tmp_path: Path, capsys, clean: FrameBlock
+) -> None:
+    """Our recorder's frames carry the device's frame counter: one sensor's, even when every
+    other frame's gyro_x sits 40 LSB higher (a tone at half the sample rate), so no "two
+    sensors" warning (a stream without a counter gets it: the test above)."""
+    burst = clean.burst.copy()
+    value = (burst[1::2, 1] & 0x3FFF).astype(np.int64)
+    value = (value - ((value & 0x2000) << 1) + 40) & 0x3FFF  # 14-bit two's complement + 40
+    burst[1::2, 1] = (burst[1::2, 1] & 0xC000) | value.astype(burst.dtype)
+    code, report, err = analyze(write_adis(tmp_path / "f.mcap", edit(clean, burst=burst)), capsys)
+    assert code == 0, err
+    assert report["input"]["warnings"] == [] and report["input"]["frames"] == N
+
+
+def test_two_gross_outliers_are_excised_and_the_curve_recomputed_without_them(
+    tmp_path: Path, capsys, clean: FrameBlock
+) -> None:
+    """gyro_y at +4000 LSB (200 °/s) in two frames: both excised (replaced by the local median)
+    and warned, and gyro_y's Allan curve, recomputed without them, has the clean recording's
+    averaging times and nearly its deviations."""
+    burst = clean.burst.copy()
+    burst[[3000, 7000], 2] = (burst[[3000, 7000], 2] & 0xC000) | 4000
+    code, report, err = analyze(write_adis(tmp_path / "f.mcap", edit(clean, burst=burst)), capsys)
+    assert code == 0, err
+    (w,) = report["input"]["warnings"]
+    assert w.startswith("gyro_y: 2 outlier sample(s) up to ") and "first at 30.00 s" in w
+    assert report["axes"]["gyro_y"]["outliers"]["count"] == 2
+    (tmp_path / "clean").mkdir()
+    _, expected, _ = analyze(write_adis(tmp_path / "clean" / "f.mcap", clean), capsys)
+    allan, truth = report["axes"]["gyro_y"]["allan"], expected["axes"]["gyro_y"]["allan"]
+    assert allan["tau_s"] == truth["tau_s"]
+    np.testing.assert_allclose(allan["adev"], truth["adev"], rtol=0.01)

@@ -555,3 +555,32 @@ def test_overlapping_intervals_are_grouped_chained_and_touching() -> None:
     assert groups == [[1, 3, 4], [5, 0, 6], [2]]
     assert ev.overlapping_groups([], []) == []
     assert [g.tolist() for g in ev.overlapping_groups([3, 3, 3], [4, 4, 4])] == [[0, 1, 2]]
+
+
+def test_without_the_event_search_a_stuck_axis_is_still_named_and_left_out(tmp_path) -> None:
+    """``events=False``: no first pass finds the stuck axes, so the analysis' own pass does —
+    the same warning and the same axes as with the search (2 min of white noise, accel_y
+    constant)."""
+    y = np.random.default_rng(3).normal(0.0, 1e-3, (12_000, 6))
+    y[:, 4] = 0.25
+    for events in (True, False):
+        doc = analysed(tmp_path, y, events=events)
+        assert doc["input"]["warnings"] == [
+            "accel_y is constant over the segment (stuck channel?): it is not analysed"
+        ]
+        assert sorted(doc["axes"]) == sorted(set(AXES) - {"accel_y"})
+
+
+def test_a_spike_inside_an_excised_event_is_excised_with_it_not_as_an_outlier(tmp_path) -> None:
+    """The bumped recording with a 30-sigma spike on gyro_y inside the bump: the event's fill
+    replaces it, so no outlier is excised from the filled series (the first pass' outlier
+    search, made on the series with the event in it, is not reused for it)."""
+    y = with_bump(noise(7))
+    at = int((BUMP["start_s"] + 5.0) * RATE_HZ)
+    j = AXES.index("gyro_y")
+    y[at, j] += 30 * N_TRUE[j] * np.sqrt(RATE_HZ)
+    doc = analysed(tmp_path, y)
+    (found,) = doc["events"]["found"]
+    assert found["excised"]["start_s"] < at / RATE_HZ < found["excised"]["stop_s"]
+    assert "outliers" not in doc["axes"]["gyro_y"]
+    assert not any("outlier" in w for w in doc["input"]["warnings"])

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import imupipe
+from imupipe.analysis.analyze import AXIS_BYTES_PER_SAMPLE
 from imupipe.model import ahead
 
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "adis16364_default_5min.mcap"
@@ -198,12 +199,12 @@ def test_an_analysis_ending_early_stops_the_child(monkeypatch: pytest.MonkeyPatc
     assert child.poll() is not None  # killed, not left running
 
 
-def noting_child(monkeypatch: pytest.MonkeyPatch) -> list[int]:
-    """A cold cache and a child that exits, after a second, 0 if it finds the note and 5 if not;
-    returns the list a call of ``compile_loop_kernels`` here appends to."""
+def noting_child(monkeypatch: pytest.MonkeyPatch, after_s: float = 1.0) -> list[int]:
+    """A cold cache and a child that exits, after ``after_s``, 0 if it finds the note and 5 if
+    not; returns the list a call of ``compile_loop_kernels`` here appends to."""
     monkeypatch.setattr(ahead, "disk_cached", lambda kernel: False)
     reads = (
-        "import sys, time, pathlib; time.sleep(1); "
+        f"import sys, time, pathlib; time.sleep({after_s}); "
         "sys.exit(0 if pathlib.Path({!r}).exists() else 5)"
     )
     monkeypatch.setattr(
@@ -243,6 +244,20 @@ def test_a_wait_that_cannot_or_must_not_take_the_loops_kernels_leaves_them_to_th
             started.taken = tmp_path / "missing-folder" / "note"
         started.wait(take_loop=case != "spilled")
     assert child.returncode == 5 and compiled == []
+
+
+def test_the_spilled_analysis_leaves_the_loops_kernels_to_its_compiling_child(
+    tmp_path: Path, small_recordings, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A recording over the memory budget (the spilled column source) whose wait finds the
+    child still compiling: the loop's kernels are left to the child, not compiled in the
+    process that holds the data (the unit case above, through :func:`imupipe.analyze`)."""
+    compiled = noting_child(monkeypatch, after_s=3.0)  # still compiling when waited for
+    path = small_recordings.make("adis", tmp_path / "in.mcap")
+    budget = 2 * AXIS_BYTES_PER_SAMPLE * small_recordings.frames  # 1.9 MB: spilled
+    report, _ = small_recordings.run(path, tmp_path / "out", budget, workers=1)
+    assert any(w.startswith("low-memory path") for w in report["input"]["warnings"])
+    assert compiled == []
 
 
 def test_a_wait_after_the_child_ended_compiles_nothing_here(
