@@ -239,6 +239,8 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/analysis/test_workers.py",
         "tests/test_odd_inputs.py",
         "tests/analysis/test_events.py",  # the first pass' events, excised beside the gaps
+        "tests/analysis/test_outliers.py",  # the loop's second spike search after excision
+        "tests/test_jit.py",  # the spilled path's compiling child
     ),
     "pipeline/cli.py": ("tests/test_cli.py", "tests/test_odd_inputs.py", "tests/test_hostile.py"),
     "pipeline/api.py": (
