@@ -82,7 +82,8 @@ BOOT_EXCEEDANCES = 10
 """The reported p-values (the model before and after the loop) draw batches of
 :data:`N_BOOT` replicates until this many reach the deviance or :data:`N_BOOT_MAX` are drawn:
 a p-value near 0.01 from 200 replicates has a Monte Carlo standard error of 0.007, from ~1000
-about 0.003 (the sequential Monte Carlo p-value, Besag & Clifford 1991, Biometrika 78(2))."""
+about 0.003 (the stopping rule of Besag & Clifford's sequential Monte Carlo p-value,
+Biometrika 78(2), 1991; the p-value itself stays (1 + reached) / (drawn + 1))."""
 P_VALUE_FLOOR = 1.0 / (N_BOOT_MAX + 1)
 """The smallest reported bootstrap p-value: none of :data:`N_BOOT_MAX` replicates reached the
 deviance (the true p is at most this; report.json ``p_value_floor``, report.md "≤")."""

@@ -24,7 +24,7 @@ from imupipe.analysis.results import (
 )
 from imupipe.device.frame_schema import SCHEMA_NAME as ADIS16364_SOURCE
 from imupipe.escape import printable
-from imupipe.model.loop import BOOT_EXCEEDANCES
+from imupipe.model.loop import BOOT_EXCEEDANCES, N_BOOT
 from imupipe.report.datasheet import Datasheet, adis16364
 from imupipe.report.exports import render as render_export
 from imupipe.report.exports import write_exports
@@ -341,7 +341,7 @@ def report_markdown(
             "## Closed loop: model error before and after",
             "",
             f"Error: {ERROR_MEASURE}. p-value: the share of parametric-bootstrap replicates "
-            "of the model whose deviance reaches the fit's, drawn 200 at a time until "
+            f"of the model whose deviance reaches the fit's, drawn {N_BOOT} at a time until "
             f"{BOOT_EXCEEDANCES} reach it or {round(1 / floor) - 1} are drawn (Besag & "
             f"Clifford 1991; ≤ {_fmt(floor)}: none did, and the true p-value is at most that). "
             "Besides its "
