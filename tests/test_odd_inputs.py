@@ -25,7 +25,13 @@ from mcap.writer import CompressionType, Writer
 from scipy import signal
 
 from imupipe.cli import main, topic_folder
-from imupipe.device.adis16364 import EA_BIT, FrameBlock, config_for_rate
+from imupipe.device.adis16364 import (
+    EA_BIT,
+    FrameBlock,
+    config_for_rate,
+    decode_words,
+    encode_words,
+)
 from imupipe.device.frame_schema import (
     DEFAULT_TOPIC,
     MESSAGE_ENCODING,
@@ -1076,9 +1082,8 @@ def test_a_devices_counted_frames_alternating_are_one_sensor_not_two(
     other frame's gyro_x sits 40 LSB higher (a tone at half the sample rate), so no "two
     sensors" warning (a stream without a counter gets it: the test above)."""
     burst = clean.burst.copy()
-    value = (burst[1::2, 1] & 0x3FFF).astype(np.int64)
-    value = (value - ((value & 0x2000) << 1) + 40) & 0x3FFF  # 14-bit two's complement + 40
-    burst[1::2, 1] = (burst[1::2, 1] & 0xC000) | value.astype(burst.dtype)
+    words, _ = encode_words(decode_words(burst[1::2, 1], 14, signed=True) + 40, 14, signed=True)
+    burst[1::2, 1] = (burst[1::2, 1] & 0xC000) | words
     code, report, err = analyze(write_adis(tmp_path / "f.mcap", edit(clean, burst=burst)), capsys)
     assert code == 0, err
     assert report["input"]["warnings"] == [] and report["input"]["frames"] == N
