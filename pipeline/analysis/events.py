@@ -62,6 +62,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import optimize, special
 
+from imupipe.analysis.common_mode import CommonMode, common_mode
 from imupipe.analysis.condition import fill_runs
 from imupipe.model.effects import Candidate, block_means
 from imupipe.stats import robust
@@ -102,9 +103,20 @@ class EventDetector:
     z_single: tuple[float, ...]
     z_joint: tuple[float, ...]
     axes: tuple[str, ...]
-    correlation: tuple[float, ...]
-    """Largest |correlation| of an axis pair's z at each scale (:func:`axis_correlation`)."""
+    pair_correlation: tuple[tuple[float, ...], ...]
+    """Correlation of each axis pair's z at each scale (:func:`axis_correlation`: C(A, 2)
+    values per scale, in :func:`np.triu_indices` order of ``axes``)."""
     false_alarm: float = FALSE_ALARM
+
+    @property
+    def correlation(self) -> tuple[float, ...]:
+        """Largest |correlation| of an axis pair's z at each scale (0 with one axis)."""
+        return tuple(float(np.max(np.abs(r), initial=0.0)) for r in self.pair_correlation)
+
+    @property
+    def dof(self) -> tuple[float, ...]:
+        """Degrees of freedom of each scale's estimates (:func:`scale_dof`)."""
+        return tuple(scale_dof(w) for w in self.windows)
 
     def as_dict(self) -> dict:
         return {
@@ -272,6 +284,12 @@ WINSOR_EFFICIENCY = 0.95
 scale of J half-overlapping windows has about 0.95 × J / 2 degrees of freedom."""
 
 
+def scale_dof(windows: int) -> float:
+    """Degrees of freedom of a scale's estimates from its ``windows`` half-overlapping windows
+    (:data:`WINSOR_EFFICIENCY` × J / 2)."""
+    return WINSOR_EFFICIENCY * windows / 2
+
+
 DENSE_SPAN = 16
 """Windows of a span in which a sustained disturbance is recognised (:func:`_sustained`)."""
 DENSE_FRACTION = 0.5
@@ -340,8 +358,8 @@ class _Scale:
 
     @property
     def dof(self) -> float:
-        """Degrees of freedom of its scale estimate (:data:`WINSOR_EFFICIENCY`)."""
-        return WINSOR_EFFICIENCY * len(self.starts) / 2
+        """Degrees of freedom of its scale estimate (:func:`scale_dof`)."""
+        return scale_dof(len(self.starts))
 
 
 def _scales(x: np.ndarray, dt: float) -> list[_Scale]:
@@ -433,7 +451,7 @@ def find_events(
         tuple(z for z, _ in limits),
         tuple(z for _, z in limits),
         names,
-        tuple(float(np.max(np.abs(r), initial=0.0)) for r in rho),
+        tuple(tuple(float(v) for v in r) for r in rho),
         false_alarm,
     )
     spans, zs, ratios, lengths = [], [], [], []
@@ -572,16 +590,23 @@ class EventsFound:
     tau0_s: float
     t0_stamp_s: float
 
+    @property
+    def common_mode(self) -> CommonMode:
+        """The axis pairs whose level fluctuations move together (:mod:`.common_mode`)."""
+        return common_mode(self.detector)
+
     def as_dict(self) -> dict:
         excised = [e.excised for e in self.events if e.excised is not None]
         return {
             "detector": self.detector.as_dict(),
             "found": [e.as_dict(self.tau0_s, self.t0_stamp_s) for e in self.events],
             "excised_samples": int(sum(b - a for a, b in excised)),
+            "common_mode": self.common_mode.as_dict(),
         }
 
     def warnings(self) -> list[str]:
-        """One line per event for the report's warnings."""
+        """One line per event for the report's warnings, and one for axes that move together."""
+        moving = self.common_mode.warning()
         return [
             f"disturbance event ({e.kind}) at {e.start_s:.1f} s for {e.duration_s:.1f} s on "
             f"{', '.join(e.axes)}: "
@@ -591,7 +616,7 @@ class EventsFound:
                 else "a lasting level change, left to the loop (bias step)"
             )
             for e in self.events
-        ]
+        ] + ([moving] if moving else [])
 
 
 def detect(

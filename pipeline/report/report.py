@@ -385,6 +385,7 @@ def _events_section(result: AnalysisResult) -> list[str]:
         "them); steps are kept and left to the loop.",
         "",
     ]
+    md += _common_mode_lines(doc["common_mode"])
     if not doc["found"]:
         return [*md, "None found.", ""]
     rows = [
@@ -402,6 +403,40 @@ def _events_section(result: AnalysisResult) -> list[str]:
     ]
     header = ("kind", "start (s)", "duration (s)", "axes: size (z)", "handling")
     return [*md, _md_table(header, rows), "", f"Excised: {doc['excised_samples']} samples.", ""]
+
+
+def _common_mode_lines(doc: dict) -> list[str]:
+    """The axis pairs whose level fluctuations move together (report.json
+    ``events.common_mode``), a table and what it means; nothing when none do."""
+    if not doc["pairs"]:
+        return []
+    rows = []
+    for pair in doc["pairs"]:
+        at = {c["window_s"]: c["value"] for c in pair["correlation"]}
+        windows = pair["significant_window_s"]
+        w = max(windows, key=lambda s: abs(at[s]))
+        rows.append((
+            "–".join(pair["axes"]),
+            f"{at[w]:.2f} ({_fmt(w)} s)",
+            f"{_fmt(windows[0])}–{_fmt(windows[-1])} s" if len(windows) > 1 else f"{_fmt(w)} s",
+            f"{pair['p_value']:.2g}" if pair["p_value"] >= 1e-16 else "< 1e-16",
+        ))  # fmt: skip
+    return [
+        "### Axes that move together",
+        "",
+        "The correlation of the axes' level fluctuations in the detector's windows (their "
+        "z-scores about the local level, clipped at 3), tested against independence "
+        f"(Fisher's z, family-wise α = {doc['alpha']:g} over {doc['tests']} correlations):",
+        "",
+        _md_table(("axes", "strongest r (window)", "significant at", "p"), rows),
+        "",
+        "A cause common to these axes moves them together: at long windows usually the "
+        "temperature or the supply moving every bias, at short ones a vibration or tilt of the "
+        "mount. Each axis' noise terms describe that axis alone; a filter that gives each axis "
+        "an independent bias state does not know that these biases move together. A recording "
+        "with the sensor's temperature lets the loop model a temperature coupling per axis.",
+        "",
+    ]
 
 
 def _params(effect: dict) -> str:

@@ -172,10 +172,38 @@ def test_clean_recording_yields_no_event_and_unchanged_numbers(reports, tmp_path
     clean = reports["clean"]
     assert clean["events"]["found"] == [] and clean["events"]["excised_samples"] == 0
     assert clean["events"]["detector"]["tests"] > 10_000
+    common = clean["events"]["common_mode"]  # independent axes: no pair moves together
+    assert common["pairs"] == []
+    assert common["tests"] == 15 * len(clean["events"]["detector"]["scales"])
     off = analysed(tmp_path, noise(7), events=False)
     assert "events" not in off
     for name in AXES:
         assert clean["axes"][name]["allan"] == off["axes"][name]["allan"]
+
+
+def test_accelerometers_sharing_a_wander_are_reported_as_moving_together(tmp_path) -> None:
+    """The three accelerometers share a white + flicker series as large as their own noise
+    (pair correlation ~0.5 at every window): report.json names their three pairs and no other,
+    report.md tabulates them, and the warning says so."""
+    y = noise(7)
+    y[:, 3:] += noise(8)[:, :1] * (N_TRUE[3] / N_TRUE[0])
+    path = write_mcap(tmp_path / "imu.mcap", y)
+    out = tmp_path / "out"
+    imupipe.analyze(path, out, rrd=False, figures=False, loop=False)
+    doc = json.loads((out / "report.json").read_text())
+    pairs = doc["events"]["common_mode"]["pairs"]
+    assert sorted(tuple(p["axes"]) for p in pairs) == [
+        ("accel_x", "accel_y"), ("accel_x", "accel_z"), ("accel_y", "accel_z")
+    ]  # fmt: skip
+    for p in pairs:
+        shortest = p["correlation"][0]  # 0.5 s windows
+        assert shortest["window_s"] == pytest.approx(0.5)
+        assert 0.45 < shortest["value"] < 0.6 and p["p_value"] < 1e-16
+    assert doc["events"]["found"] == []
+    (warning,) = [w for w in doc["input"]["warnings"] if w.startswith("axes that move together")]
+    assert "more pair" not in warning
+    md = (out / "report.md").read_text()
+    assert md.count("\n| accel_") == 3 and "### Axes that move together" in md
 
 
 # --- the acceptance thresholds, on unit white noise of fine block means ---------------------
@@ -278,7 +306,7 @@ def test_correlated_axes_raise_the_two_axis_threshold(second: float, expected: i
     det = ev.find_events(means, DT, 50, BLOCKS * 50)[1]
     k = det.scales_s.index(BOX * DT)
     assert det.correlation[k] == pytest.approx(0.7, abs=0.05)
-    dof = ev.WINSOR_EFFICIENCY * det.windows[k] / 2
+    dof = det.dof[k]
     independent = ev.thresholds(sum(det.windows), 6, dof)[1]
     assert z2 > independent + 0.4
     assert 1.05 * z2 < z1  # no single axis alone is an event

@@ -435,6 +435,7 @@ def test_the_events_section_names_the_shortest_and_longest_window_tested() -> No
     doc = {
         "detector": {"tests": 1200, "scales": scales, "axes": ["gyro_x"], "false_alarm": 1e-3},
         "found": [],
+        "common_mode": {"alpha": 1e-3, "tests": 0, "pairs": []},
     }
     events = SimpleNamespace(as_dict=lambda: doc)
     (_, _, tested, _, none, _) = report._events_section(SimpleNamespace(events=events))

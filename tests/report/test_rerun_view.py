@@ -368,7 +368,7 @@ def _with_events(result, spans: list[tuple[int, int] | None], tau0: float, t0: f
         )
         for a, b in (s or (None, None) for s in spans)
     )
-    detector = EventDetector(0.5, (0.5,), (100,), (6.0,), (4.5,), ("gyro_x",), (0.0,))
+    detector = EventDetector(0.5, (0.5,), (100,), (6.0,), (4.5,), ("gyro_x",), ((),))
     return replace(result, events=EventsFound(detector, events, tau0, t0))
 
 

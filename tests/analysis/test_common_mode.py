@@ -1,0 +1,137 @@
+"""Axes that move together (:mod:`imupipe.analysis.common_mode`): the Fisher test of the event
+detector's per-scale axis correlations, its Bonferroni family, and what the report says."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import special
+
+from imupipe.analysis import common_mode as cm
+from imupipe.analysis import events as ev
+from imupipe.report import report
+from imupipe.vocab import AXES
+
+AXES3 = ("gyro_x", "accel_x", "accel_y")  # pairs in triu order: gx-ax, gx-ay, ax-ay
+WINDOWS = 206  # dof 0.95 x 206 / 2 = 97.85
+
+
+def detector(
+    correlations: list[tuple[float, float, float]], windows: tuple[int, ...] | None = None
+) -> ev.EventDetector:
+    """A detector of three axes whose pair correlations at each scale are given."""
+    k = len(correlations)
+    scales = tuple(0.5 * 2**j for j in range(k))
+    return ev.EventDetector(
+        0.5, scales, windows or (WINDOWS,) * k, (6.0,) * k, (5.0,) * k, AXES3, tuple(correlations)
+    )
+
+
+def r_at(p: float, dof: float) -> float:
+    """The correlation whose two-sided Fisher p-value is ``p`` at ``dof``."""
+    return float(np.tanh(-special.ndtri(p / 2) / np.sqrt(dof - 3)))
+
+
+def test_fisher_p_is_the_two_sided_normal_tail_of_atanh_r_times_sqrt_dof_minus_3() -> None:
+    z = np.arctanh(0.5) * np.sqrt(100.0)
+    assert cm.fisher_p(np.array([0.5, -0.5]), np.array([103.0, 103.0])) == pytest.approx(
+        [special.erfc(z / np.sqrt(2))] * 2, rel=1e-12
+    )
+    assert cm.fisher_p(np.array([0.9]), np.array([3.0]))[0] == 1.0  # no dof left: no evidence
+    assert cm.fisher_p(np.array([1.0]), np.array([50.0]))[0] == pytest.approx(0.0, abs=1e-300)
+
+
+@pytest.mark.parametrize("factor, named", [(0.9, True), (1.1, False)])
+def test_a_pair_is_named_when_its_p_times_the_tests_is_at_most_alpha(factor, named) -> None:
+    """Two scales x three pairs = 6 tests: a correlation whose own p is 0.9 alpha / 6 is named,
+    one at 1.1 alpha / 6 is not (Bonferroni over scales and pairs, not per scale)."""
+    dof = ev.scale_dof(WINDOWS)
+    r = r_at(factor * cm.ALPHA / 6, dof)
+    found = cm.common_mode(detector([(0.0, 0.0, 0.0), (0.0, -r, 0.0)]))
+    assert found.tests == 6
+    if named:
+        (pair,) = found.pairs
+        assert pair.axes == ("gyro_x", "accel_y")  # the second pair: negative counts too
+        assert pair.p_value == pytest.approx(0.9 * cm.ALPHA, rel=1e-6)
+        assert pair.significant_s == (1.0,) and pair.strongest == (1.0, pytest.approx(-r))
+    else:
+        assert found.pairs == ()
+        assert found.warning() is None
+
+
+def test_pairs_are_ordered_by_their_strongest_significant_correlation() -> None:
+    """Each pair's strongest correlation is read among its significant scales only, and the
+    pairs come strongest first; every scale's correlation is kept for the report."""
+    found = cm.common_mode(
+        detector([(0.1, 0.0, 0.62), (0.55, 0.0, 0.5), (0.9, 0.0, 0.3)], (WINDOWS, WINDOWS, 8))
+    )  # 8 windows: dof 3.8, where even r = 0.9 is no evidence
+    assert [p.axes for p in found.pairs] == [("accel_x", "accel_y"), ("gyro_x", "accel_x")]
+    top, second = found.pairs
+    assert top.significant_s == (0.5, 1.0) and top.strongest == (0.5, 0.62)
+    assert second.significant_s == (1.0,) and second.strongest == (1.0, 0.55)
+    assert second.correlation == (0.1, 0.55, 0.9)
+    assert found.as_dict()["pairs"][1]["correlation"][1] == {"window_s": 1.0, "value": 0.55}
+
+
+def test_the_warning_names_the_three_strongest_pairs_and_counts_the_rest() -> None:
+    found = cm.common_mode(detector([(0.4, 0.5, 0.85), (0.3, 0.2, 0.1)]))
+    assert len(found.pairs) == 3
+    assert (
+        found.strongest(2)
+        == "accel_x–accel_y r 0.85 at 0.5 s, gyro_x–accel_y r 0.50 at 0.5 s and 1 more pair"
+    )
+    assert found.warning().startswith(
+        "axes that move together: accel_x–accel_y r 0.85 at 0.5 s, gyro_x–accel_y r 0.50 at "
+        "0.5 s, gyro_x–accel_x r 0.40 at 0.5 s (correlation of their level fluctuations, "
+        "family-wise p ≤ 0.001)"
+    )
+
+
+def test_one_axis_has_no_pairs() -> None:
+    det = ev.EventDetector(0.5, (0.5,), (100,), (6.0,), (np.inf,), ("gyro_x",), ((),))
+    assert cm.common_mode(det) == cm.CommonMode((), 0)
+    assert det.correlation == (0.0,)
+
+
+def unit_means(seed: int, shared: float) -> dict[str, np.ndarray]:
+    """4 h of unit white fine means; the three accelerometers share a common part whose
+    pair correlation is ``shared``."""
+    rng = np.random.default_rng(seed)
+    common = rng.standard_normal(28_800)
+    out = {a: rng.standard_normal(28_800) for a in AXES}
+    for a in AXES[3:]:
+        out[a] = np.sqrt(shared) * common + np.sqrt(1 - shared) * out[a]
+    return out
+
+
+def test_the_detector_names_the_accelerometers_sharing_noise_and_no_other_pair() -> None:
+    """Accelerometers sharing a common part (pair correlation 0.15): their three pairs are
+    named at the short windows, where the windows are many, and no gyro pair is; independent
+    axes: none."""
+    shared = ev.find_events(unit_means(1, 0.15), 0.5, 50, 28_800 * 50)[1]
+    found = cm.common_mode(shared)
+    assert {p.axes for p in found.pairs} == {
+        ("accel_x", "accel_y"), ("accel_x", "accel_z"), ("accel_y", "accel_z")
+    }  # fmt: skip
+    for p in found.pairs:
+        assert p.correlation[0] == pytest.approx(0.15, abs=0.03)
+        assert p.significant_s[0] == 0.5
+    assert found.tests == 15 * len(shared.scales_s)
+    alone = ev.find_events(unit_means(1, 0.0), 0.5, 50, 28_800 * 50)[1]
+    assert cm.common_mode(alone).pairs == ()
+
+
+def test_the_report_tabulates_each_pair_with_its_strongest_window_and_span() -> None:
+    """One row a pair: its strongest significant correlation and window, the span of its
+    significant windows (0.3 at 2 s is not: p 0.0027 x 9 tests), its family-wise p."""
+    pairs = [(0.1, 0.0, 0.95), (0.55, 0.0, 0.5), (0.0, 0.0, 0.3)]
+    doc = cm.common_mode(detector(pairs)).as_dict()
+    lines = report._common_mode_lines(doc)
+    assert lines[0] == "### Axes that move together"
+    assert "family-wise α = 0.001 over 9 correlations" in lines[2]
+    table = lines[4].splitlines()
+    assert table[2] == "| accel_x–accel_y | 0.95 (0.5 s) | 0.5–1 s | < 1e-16 |"
+    p = doc["pairs"][1]["p_value"]
+    assert p == pytest.approx(9 * cm.fisher_p(0.55, ev.scale_dof(WINDOWS)), rel=1e-9)
+    assert table[3] == f"| gyro_x–accel_x | 0.55 (1 s) | 1 s | {p:.2g} |"
+    assert report._common_mode_lines({**doc, "pairs": []}) == []
