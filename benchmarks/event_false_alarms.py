@@ -13,6 +13,9 @@ recordings can show whether the bound holds (an honest rule alarms on ≤ α of 
 * ``simulator``: our virtual ADIS16364 with the lab temperature profile coupled into all six
   axes (one temperature: correlated slow wander).
 
+Each clean recording also counts whether :func:`imupipe.analysis.common_mode.common_mode`
+names an axis pair that moves together at each α (on ``independent`` a false finding).
+
 ``tilt``: 2 h / 100 Hz recordings of the independent generator with its 360 s tilt episode at
 ``--sizes`` (× 3 × the accelerometers' ADEV at 360 s); a tilt is found when an event overlaps
 its interval on accel_x or accel_y.
@@ -34,6 +37,7 @@ import numpy as np
 from scipy import stats
 
 from imupipe.analysis import events as ev
+from imupipe.analysis.common_mode import common_mode
 from imupipe.model.effects import spike_candidate
 from imupipe.recording.scenario import Scenario, Temperature
 from imupipe.vocab import AXES
@@ -98,6 +102,7 @@ def alarms(y: np.ndarray) -> dict[str, object]:
             before, _ = ev.find_events(means, b / RATE_HZ, b, len(y), false_alarm=alpha)
         out[f"after_{alpha:g}"] = found
         out[f"before_{alpha:g}"] = before
+        out[f"common_mode_{alpha:g}"] = common_mode(det, alpha).pairs
         out["max_correlation"] = max(det.correlation)
     return out
 
@@ -148,6 +153,10 @@ def main() -> None:
                 for key in [f"{w}_{a:g}" for a in ALPHAS for w in ("before", "after")]:
                     k = sum(bool(r[key]) for r in sel)
                     print(f"  {key}: recordings with an event {interval(k, len(sel))}")
+                for alpha in ALPHAS:  # axes that move together (imupipe.analysis.common_mode)
+                    k = sum(bool(r[f"common_mode_{alpha:g}"]) for r in sel)
+                    named = interval(k, len(sel))
+                    print(f"  common_mode_{alpha:g}: recordings with a pair {named}")
             for s, seed, r in rows:
                 for e in r["after_0.001"]:
                     print(f"  false event: {s} seed {seed} {e.kind} {e.axes} at {e.start_s} s")

@@ -68,6 +68,7 @@ class PairMotion:
             "axes": list(self.axes),
             "p_value": self.p_value,
             "significant_window_s": list(self.significant_s),
+            "strongest": dict(zip(("window_s", "value"), self.strongest, strict=True)),
             "correlation": [
                 {"window_s": w, "value": r}
                 for w, r in zip(self.window_s, self.correlation, strict=True)

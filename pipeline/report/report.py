@@ -412,13 +412,12 @@ def _common_mode_lines(doc: dict) -> list[str]:
         return []
     rows = []
     for pair in doc["pairs"]:
-        at = {c["window_s"]: c["value"] for c in pair["correlation"]}
-        windows = pair["significant_window_s"]
-        w = max(windows, key=lambda s: abs(at[s]))
+        top, windows = pair["strongest"], pair["significant_window_s"]
         rows.append((
             "–".join(pair["axes"]),
-            f"{at[w]:.2f} ({_fmt(w)} s)",
-            f"{_fmt(windows[0])}–{_fmt(windows[-1])} s" if len(windows) > 1 else f"{_fmt(w)} s",
+            f"{top['value']:.2f} ({_fmt(top['window_s'])} s)",
+            f"{_fmt(windows[0])}–{_fmt(windows[-1])} s" if len(windows) > 1
+            else f"{_fmt(windows[0])} s",
             f"{pair['p_value']:.2g}" if pair["p_value"] >= 1e-16 else "< 1e-16",
         ))  # fmt: skip
     return [

@@ -71,6 +71,7 @@ def test_pairs_are_ordered_by_their_strongest_significant_correlation() -> None:
     assert second.significant_s == (1.0,) and second.strongest == (1.0, 0.55)
     assert second.correlation == (0.1, 0.55, 0.9)
     assert found.as_dict()["pairs"][1]["correlation"][1] == {"window_s": 1.0, "value": 0.55}
+    assert found.as_dict()["pairs"][1]["strongest"] == {"window_s": 1.0, "value": 0.55}
 
 
 def test_the_warning_names_the_three_strongest_pairs_and_counts_the_rest() -> None:
