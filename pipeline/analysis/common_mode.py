@@ -129,6 +129,15 @@ def fisher_p(r: np.ndarray, dof: np.ndarray) -> np.ndarray:
     return np.where(dof > 3, 2 * special.ndtr(-z), 1.0)
 
 
+def critical_correlation(dof: np.ndarray, tests: int, alpha: float = ALPHA) -> np.ndarray:
+    """|r| at which a correlation with ``dof`` degrees of freedom passes the family-wise test
+    of ``tests`` correlations: tanh(Φ̄⁻¹(α / (2 · tests)) / √(ν − 3)) (1 where ν ≤ 3)."""
+    dof = np.asarray(dof, dtype=float)
+    z = -special.ndtri(alpha / (2 * max(tests, 1)))
+    with np.errstate(divide="ignore"):
+        return np.where(dof > 3, np.tanh(z / np.sqrt(np.maximum(dof - 3, 0.0))), 1.0)
+
+
 def common_mode(detector: EventDetector, alpha: float = ALPHA) -> CommonMode:
     """The pairs of ``detector.axes`` whose level fluctuations are correlated (module
     docstring), strongest first."""

@@ -10,6 +10,8 @@
   regressed out in the time domain, the deviation after that correction), model before and after,
   and the normalised residual z before and after, each over its fit's τ range (symmetric-log
   beyond |z| = 5, so a rejected baseline's large z leaves the final model's readable).
+- ``common_mode.png``: the correlation of each pair of axes that move together against the
+  window length, with the family-wise test's critical |r| (only when some pair does).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import numpy as np
 from matplotlib.axis import Axis
 from matplotlib.ticker import FormatStrFormatter, LogFormatter, LogLocator, NullLocator
 
+from imupipe.analysis.common_mode import critical_correlation
 from imupipe.analysis.results import AnalysisResult, AxisResult
 from imupipe.model.ieee952 import design_columns
 from imupipe.vocab import SENSOR_TITLES, TERM_NAMES
@@ -194,6 +197,42 @@ def loop_figure(result: AnalysisResult, sensor: str, path: Path) -> Path | None:
     return path
 
 
+def common_mode_figure(result: AnalysisResult, path: Path) -> Path | None:
+    """The correlation of each pair of axes that move together against the window length,
+    with the family-wise test's critical |r| (:mod:`imupipe.analysis.common_mode`); None when
+    no pair moves together."""
+    if result.events is None or not result.events.common_mode.pairs:
+        return None
+    detector, found = result.events.detector, result.events.common_mode
+    fig, ax = plt.subplots(figsize=(8, 4.5), gridspec_kw={**_MARGINS, "bottom": 0.12})
+    colors = plt.get_cmap("tab20").colors
+    styles = {2: "-", 1: "--", 0: ":"}  # accelerometers in the pair: 2, 1 or 0
+    for k, pair in enumerate(found.pairs):
+        accels = sum(a.startswith("accel") for a in pair.axes)
+        significant = [w in pair.significant_s for w in pair.window_s]
+        color = colors[k % len(colors)]
+        ax.plot(pair.window_s, pair.correlation, ls=styles[accels], color=color, lw=1.0,
+                label="–".join(pair.axes))  # fmt: skip
+        w, r = np.asarray(pair.window_s), np.asarray(pair.correlation)
+        ax.plot(w[significant], r[significant], "o", color=color, ms=3.5)
+    critical = critical_correlation(np.array(detector.dof), found.tests, found.alpha)
+    ax.fill_between(detector.scales_s, -critical, critical, color="0.88", lw=0,
+                    label=f"not significant (family-wise α = {found.alpha:g})")  # fmt: skip
+    ax.axhline(0.0, color="0.3", lw=0.6)
+    ax.set_xscale("log")
+    sparse_log_ticks(ax.xaxis)
+    lowest = min(min(p.correlation) for p in found.pairs)
+    ax.set_ylim(-1.0 if lowest < -0.2 else -0.3, 1.0)
+    ax.set_xlabel("window length [s]")
+    ax.set_ylabel("correlation of the level fluctuations")
+    ax.set_title("Axes that move together (dots: significant; solid: two accelerometers)")
+    ax.grid(True, which="major", lw=0.4, alpha=0.6)
+    ax.legend(fontsize=6, ncol=4, loc="lower left")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def sensor_figures(result: AnalysisResult, sensor: str, out_dir: Path) -> dict[str, Path]:
     """Write the figures of one sensor that apply into ``out_dir``; returns {caption: path}."""
     written: dict[str, Path] = {}
@@ -210,13 +249,16 @@ def write_figures(result: AnalysisResult, out_dir: Path, processes: int = 1) -> 
     drawn in a forked child while this process draws the gyroscopes' (matplotlib holds the
     GIL, so a thread would not draw at the same time); the child's error is raised here, and
     the child has ended when this returns, however it returns."""
+    common = common_mode_figure(result, Path(out_dir) / "common_mode.png")
+    together = {} if common is None else {"Axes that move together": common}
     if processes < 2 or "fork" not in multiprocessing.get_all_start_methods():
         return {
             **sensor_figures(result, "gyro", out_dir),
             **sensor_figures(result, "accel", out_dir),
+            **together,
         }
     fork = multiprocessing.get_context("fork")
     with ProcessPoolExecutor(1, mp_context=fork) as child:
         accel = child.submit(sensor_figures, result, "accel", Path(out_dir))
         gyro = sensor_figures(result, "gyro", out_dir)
-        return {**gyro, **accel.result()}
+        return {**gyro, **accel.result(), **together}

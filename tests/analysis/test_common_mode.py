@@ -136,3 +136,29 @@ def test_the_report_tabulates_each_pair_with_its_strongest_window_and_span() -> 
     assert p == pytest.approx(9 * cm.fisher_p(0.55, ev.scale_dof(WINDOWS)), rel=1e-9)
     assert table[3] == f"| gyro_x–accel_x | 0.55 (1 s) | 1 s | {p:.2g} |"
     assert report._common_mode_lines({**doc, "pairs": []}) == []
+
+
+def test_the_critical_correlation_is_where_the_family_wise_p_reaches_alpha() -> None:
+    dof = np.array([2.0, 97.85, 400.0])
+    r = cm.critical_correlation(dof, 6)
+    assert r[0] == 1.0  # no dof left: nothing passes
+    assert r[1] == pytest.approx(np.tanh(-special.ndtri(1e-3 / 12) / np.sqrt(94.85)), rel=1e-12)
+    assert 6 * cm.fisher_p(r[1:], dof[1:]) == pytest.approx([cm.ALPHA] * 2, rel=1e-9)
+
+
+def test_the_figure_is_drawn_only_when_some_pair_moves_together(tmp_path) -> None:
+    """common_mode.png: one line a named pair (and the not-significant band); no file when no
+    pair moves together."""
+    from types import SimpleNamespace
+
+    from imupipe.report import figures
+
+    def result(pairs: list[tuple[float, float, float]]) -> SimpleNamespace:
+        return SimpleNamespace(events=ev.EventsFound(detector(pairs), (), 0.01, 0.0))
+
+    path = tmp_path / "common_mode.png"
+    assert figures.common_mode_figure(result([(0.0, 0.1, 0.0), (0.0, 0.0, 0.2)]), path) is None
+    assert not path.exists()
+    drawn = figures.common_mode_figure(result([(0.9, 0.1, 0.6), (0.8, 0.0, 0.2)]), path)
+    assert drawn == path and path.stat().st_size > 10_000
+    assert figures.common_mode_figure(SimpleNamespace(events=None), path) is None
