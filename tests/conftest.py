@@ -3,9 +3,10 @@ the column-source and low-memory tests analyse."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +42,63 @@ def cli(capsys: pytest.CaptureFixture[str]) -> Callable[[list[str]], tuple[int, 
     return in_process
 
 
+def write_imu_mcap(
+    path: Path,
+    imu: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+    *,
+    log_ns: np.ndarray | None = None,
+    chunk: int | Sequence[int] | None = None,
+    frame_id: str = "imu",
+    no_estimate: tuple[bool, bool] = (False, False),
+    temperature: tuple[str, np.ndarray, np.ndarray] | None = None,
+) -> Path:
+    """A ROS 2 MCAP as our :class:`BulkWriter` writes it (zstd chunks, schemas without text):
+    ``imu`` {topic: (header stamps ns, gyro (n, 3) rad/s, accel (n, 3) m/s²)} as
+    ``sensor_msgs/msg/Imu`` messages (:func:`imu_payloads` with ``frame_id`` and
+    ``no_estimate``) logged at ``log_ns`` (default: the stamps), each topic in chunks of
+    ``chunk`` messages (a sequence: the sizes of its successive chunks; None: one chunk), a
+    topic's channel registered before its chunks.  ``temperature``: (topic, log times ns,
+    ``sensor_msgs/msg/Temperature`` payloads), its channel registered after the first topic's,
+    and after each chunk of that topic a chunk of those logged before its next chunk starts
+    (all, with one chunk).  Returns ``path``."""
+    with open(path, "wb") as f:
+        w = BulkWriter(f, profile="ros2")
+        schema = w.register_schema(IMU_SCHEMA, "ros2msg", b"")
+        for k, (topic, (stamps, gyro, accel)) in enumerate(imu.items()):
+            cid = w.register_channel(topic, "cdr", schema)
+            with_temperature = temperature is not None and k == 0
+            if with_temperature:
+                temp_topic, temp_log, temp_payloads = temperature
+                temp_schema = w.register_schema(TEMPERATURE_SCHEMA, "ros2msg", b"")
+                temp = w.register_channel(temp_topic, "cdr", temp_schema)
+            log = stamps if log_ns is None else log_ns
+            n = len(stamps)
+            if chunk is None:
+                starts = [0]
+            elif isinstance(chunk, int):
+                starts = list(range(0, n, chunk))
+            else:
+                starts = [0, *itertools.accumulate(chunk)][:-1]
+            written = 0  # temperature messages
+            for a, b in itertools.pairwise([*starts, n]):
+                payloads = imu_payloads(
+                    stamps[a:b], gyro[a:b], accel[a:b], frame_id=frame_id, no_estimate=no_estimate
+                )
+                w.write_chunk(cid, log[a:b], payloads)
+                if with_temperature:
+                    upto = np.searchsorted(temp_log, log[b]) if b < n else len(temp_log)
+                    w.write_chunk(temp, temp_log[written:upto], temp_payloads[written:upto])
+                    written = upto
+        w.finish()
+    return path
+
+
+@pytest.fixture(scope="session")
+def imu_mcap() -> Callable[..., Path]:
+    """``imu_mcap(path, {topic: (stamps, gyro, accel)}, ...)``: :func:`write_imu_mcap`."""
+    return write_imu_mcap
+
+
 N = 24_000  # 100 Hz, 4 min
 
 
@@ -74,16 +132,8 @@ def imu_bag(path: Path) -> Path:
     gyro[N // 2, 0] = np.nan
     t_stamps = stamps[::100]
     temp = 25 + 0.01 * np.arange(len(t_stamps))
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        tmp = w.register_channel(
-            "/imu/temperature", "cdr", w.register_schema(TEMPERATURE_SCHEMA, "ros2msg", b"")
-        )
-        w.write_chunk(imu, stamps, imu_payloads(stamps, gyro, accel))
-        w.write_chunk(tmp, t_stamps, temperature_payloads(t_stamps, temp))
-        w.finish()
-    return path
+    temperature = ("/imu/temperature", t_stamps, temperature_payloads(t_stamps, temp))
+    return write_imu_mcap(path, {"/imu/data": (stamps, gyro, accel)}, temperature=temperature)
 
 
 def run(path: Path, out: Path, budget: int, **options) -> tuple[dict, pl.DataFrame]:

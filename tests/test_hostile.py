@@ -29,7 +29,7 @@ from imupipe.cli import main, topic_folder
 from imupipe.device.adis16364 import config_for_rate
 from imupipe.device.frame_schema import SCHEMA_NAME
 from imupipe.errors import InputError
-from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, decode
+from imupipe.io.decode import IMU_SCHEMA, decode
 from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.recording.recorder import FrameWriter
 from imupipe.recording.simulator import VirtualADIS16364
@@ -255,27 +255,23 @@ def test_split_files_with_different_device_metadata_are_refused(tmp_path: Path, 
     assert "gyro_range_dps" in err and "sens_avg" in err
 
 
-def split_bag(bag: Path, files: int, n: int = 100) -> Path:
+def split_bag(imu_mcap, bag: Path, files: int, n: int = 100) -> Path:
     """``files`` split files of ``n`` consecutive 100 Hz Imu messages each."""
     bag.mkdir()
     for k in range(files):
         log = hm.T0_NS + (k * n + np.arange(n, dtype=np.int64)) * 10_000_000
-        with open(bag / f"bag_{k}.mcap", "wb") as f:
-            w = BulkWriter(f, profile="ros2")
-            cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-            w.write_chunk(cid, log, imu_payloads(log, np.zeros((n, 3)), np.ones((n, 3))))
-            w.finish()
+        imu_mcap(bag / f"bag_{k}.mcap", {"/imu": (log, np.zeros((n, 3)), np.ones((n, 3)))})
     return bag
 
 
-def test_split_files_without_metadata_are_read_in_natural_order(tmp_path: Path) -> None:
-    rec = decode(split_bag(tmp_path / "bag", 12))
+def test_split_files_without_metadata_are_read_in_natural_order(tmp_path: Path, imu_mcap) -> None:
+    rec = decode(split_bag(imu_mcap, tmp_path / "bag", 12))
     t = rec.frames["t_s"].to_numpy()
     assert len(t) == 1200 and np.all(np.diff(t) > 0)  # bag_2 .. bag_9 before bag_10
 
 
-def test_a_listed_file_that_is_missing_is_warned_about(tmp_path: Path) -> None:
-    bag = split_bag(tmp_path / "bag", 2)
+def test_a_listed_file_that_is_missing_is_warned_about(tmp_path: Path, imu_mcap) -> None:
+    bag = split_bag(imu_mcap, tmp_path / "bag", 2)
     (bag / "metadata.yaml").write_text(
         "rosbag2_bagfile_information:\n  relative_file_paths:\n"
         "    - bag_0.mcap\n    - bag_1.mcap\n    - bag_2.mcap\n"
@@ -285,8 +281,8 @@ def test_a_listed_file_that_is_missing_is_warned_about(tmp_path: Path) -> None:
     assert "metadata.yaml lists bag_2.mcap, which is missing" in rec.warnings
 
 
-def test_a_fifo_named_mcap_is_refused_not_waited_on(tmp_path: Path) -> None:
-    bag = split_bag(tmp_path / "bag", 2)
+def test_a_fifo_named_mcap_is_refused_not_waited_on(tmp_path: Path, imu_mcap) -> None:
+    bag = split_bag(imu_mcap, tmp_path / "bag", 2)
     os.mkfifo(bag / "bag_2.mcap")
     proc = subprocess.run(
         [sys.executable, "-m", "imupipe", "info", str(bag)],
@@ -298,8 +294,8 @@ def test_a_fifo_named_mcap_is_refused_not_waited_on(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("kind", ["folder", "dangling link"])
-def test_a_split_file_that_is_no_file_exits_2(tmp_path: Path, kind: str, cli) -> None:
-    bag = split_bag(tmp_path / "bag", 2)
+def test_a_split_file_that_is_no_file_exits_2(tmp_path: Path, kind: str, cli, imu_mcap) -> None:
+    bag = split_bag(imu_mcap, tmp_path / "bag", 2)
     if kind == "folder":
         (bag / "bag_2.mcap").mkdir()
     else:
@@ -309,8 +305,8 @@ def test_a_split_file_that_is_no_file_exits_2(tmp_path: Path, kind: str, cli) ->
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root reads a file without read permission")
-def test_an_unreadable_split_file_exits_2(tmp_path: Path, cli) -> None:
-    bag = split_bag(tmp_path / "bag", 2)
+def test_an_unreadable_split_file_exits_2(tmp_path: Path, cli, imu_mcap) -> None:
+    bag = split_bag(imu_mcap, tmp_path / "bag", 2)
     (bag / "bag_1.mcap").chmod(0)
     code, _, err = cli(["info", str(bag)])
     one_error_line(code, err, "bag_1.mcap: cannot be read")
@@ -407,7 +403,9 @@ def test_an_out_that_cannot_take_the_reports_is_one_line(tmp_path: Path, case, c
     assert (tmp_path / "notes" / "thesis.tex").read_text() == "do not delete"
 
 
-def scaled_imu(path: Path, factor: float, alternate: bool = False, glitch: bool = False) -> Path:
+def scaled_imu(
+    imu_mcap, path: Path, factor: float, alternate: bool = False, glitch: bool = False
+) -> Path:
     n = 3000
     rng = np.random.default_rng(5)
     gyro, accel = rng.normal(0, 1e-3, (n, 3)) * factor, rng.normal(0, 1e-2, (n, 3)) * factor
@@ -417,29 +415,24 @@ def scaled_imu(path: Path, factor: float, alternate: bool = False, glitch: bool 
         gyro[:, 2] = 0.25
         gyro[1234, 2] = 0.5
     log = hm.T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        w.write_chunk(cid, log, imu_payloads(log, gyro, accel))
-        w.finish()
-    return path
+    return imu_mcap(path, {"/imu": (log, gyro, accel)})
 
 
 @pytest.mark.parametrize(
     ("factor", "expected"),
     [(1e200, "beyond what float64 Allan sums hold"), (1e-310, "below what float64 Allan sums")],
 )
-def test_values_float64_cannot_square_are_one_line(tmp_path: Path, factor, expected, cli):
-    path = scaled_imu(tmp_path / "f.mcap", factor)
+def test_values_float64_cannot_square_are_one_line(tmp_path: Path, factor, expected, cli, imu_mcap):
+    path = scaled_imu(imu_mcap, tmp_path / "f.mcap", factor)
     code, _, err = cli(analyze_args(path, tmp_path / "out"))
     one_error_line(code, err, "no axis can be analysed: gyro_x ")
     assert expected in err
 
 
-def test_an_alternating_lsb_and_a_glitch_are_not_fitted(tmp_path: Path, cli) -> None:
+def test_an_alternating_lsb_and_a_glitch_are_not_fitted(tmp_path: Path, cli, imu_mcap) -> None:
     """Items 8 and 11: a channel flipping 0/1 LSB and a constant channel with one glitch get
     no fitted N (they are treated like a stuck channel); the other axes are analysed."""
-    path = scaled_imu(tmp_path / "f.mcap", 1.0, alternate=True, glitch=True)
+    path = scaled_imu(imu_mcap, tmp_path / "f.mcap", 1.0, alternate=True, glitch=True)
     code, _, err = cli(analyze_args(path, tmp_path / "out"))
     assert code == 0 and "Traceback" not in err and "RuntimeWarning" not in err, err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
@@ -507,32 +500,26 @@ def test_record_options_that_make_no_recording_are_one_line(tmp_path, args, expe
 # --- 10. a Temperature topic of another device ----------------------------------------------
 
 
-def imu_with_temperature(path: Path, temperature_topic: str, frame: bytes = b"bat") -> Path:
+def imu_with_temperature(imu_mcap, path: Path, temperature_topic: str, frame: str = "bat") -> Path:
     """An Imu topic /imu/data (frame_id "imu") and a Temperature topic (frame_id ``frame``,
     3 characters) at 31.5 °C."""
     n = 3000
     rng = np.random.default_rng(8)
     log = hm.T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        cid = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        tid = w.register_channel(
-            temperature_topic, "cdr", w.register_schema(TEMPERATURE_SCHEMA, "ros2msg", b"")
-        )
-        gyro, accel = rng.normal(0, 1e-3, (n, 3)), rng.normal(0, 1e-2, (n, 3))
-        w.write_chunk(cid, log, imu_payloads(log, gyro, accel))
-        temp = temperature_payloads(log[::100], np.full(30, 31.5))
-        temp[:, 16:20] = np.frombuffer(frame + b"\0", np.uint8)
-        w.write_chunk(tid, log[::100], temp)
-        w.finish()
-    return path
+    gyro, accel = rng.normal(0, 1e-3, (n, 3)), rng.normal(0, 1e-2, (n, 3))
+    temp = temperature_payloads(log[::100], np.full(30, 31.5), frame)
+    return imu_mcap(
+        path, {"/imu/data": (log, gyro, accel)}, temperature=(temperature_topic, log[::100], temp)
+    )
 
 
-def test_a_temperature_topic_of_another_device_is_not_the_imus(tmp_path: Path, cli) -> None:
-    rec = decode(imu_with_temperature(tmp_path / "a.mcap", "/battery/temperature"))
+def test_a_temperature_topic_of_another_device_is_not_the_imus(
+    tmp_path: Path, cli, imu_mcap
+) -> None:
+    rec = decode(imu_with_temperature(imu_mcap, tmp_path / "a.mcap", "/battery/temperature"))
     assert rec.frames["temp_c"].null_count() == 3000  # 31.5 °C of the battery is not used
     assert rec.temperature_topic is None
-    path = imu_with_temperature(tmp_path / "b.mcap", "/imu/temperature")
+    path = imu_with_temperature(imu_mcap, tmp_path / "b.mcap", "/imu/temperature")
     code, _, err = cli(analyze_args(path, tmp_path / "out"))
     assert code == 0, err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
@@ -614,7 +601,7 @@ def test_structurally_hostile_mcap_is_exit_2_or_a_warning(
 # --- 11. a rate switching from 200 to 100 Hz -----------------------------------------------
 
 
-def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, cli) -> None:
+def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, cli, imu_mcap) -> None:
     """White noise of N = 1e-3 rad/s/√Hz, 24000 frames at 200 Hz then 16000 at 100 Hz: the
     200 Hz part is analysed alone and N comes out right (as one series it was ~10 % low)."""
     fast, slow = 24_000, 16_000
@@ -625,12 +612,7 @@ def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, cli) -> N
     rng = np.random.default_rng(4)
     white = rng.normal(0, 1, (fast + slow, 6)) * (1e-3 * np.sqrt(rate))[:, None]
     log = hm.T0_NS + t_ns
-    path = tmp_path / "f.mcap"
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        w.write_chunk(cid, log, imu_payloads(log, white[:, :3], white[:, 3:]))
-        w.finish()
+    path = imu_mcap(tmp_path / "f.mcap", {"/imu": (log, white[:, :3], white[:, 3:])})
     code, _, err = cli(analyze_args(path, tmp_path / "out"))
     assert code == 0, err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
@@ -647,13 +629,13 @@ def test_a_rate_switch_is_cut_not_averaged_into_jitter(tmp_path: Path, cli) -> N
         assert n_fit == pytest.approx(1e-3, rel=0.03)
 
 
-def test_a_temperature_topic_by_frame_id_or_by_choice(tmp_path: Path, cli) -> None:
+def test_a_temperature_topic_by_frame_id_or_by_choice(tmp_path: Path, cli, imu_mcap) -> None:
     """Item 10: a Temperature topic elsewhere but with the IMU's frame_id is the IMU's; any
     other is used only when named by --temperature-topic; a wrong name is one line."""
-    rec = decode(imu_with_temperature(tmp_path / "a.mcap", "/sensors/temp", frame=b"imu"))
+    rec = decode(imu_with_temperature(imu_mcap, tmp_path / "a.mcap", "/sensors/temp", frame="imu"))
     assert rec.temperature_topic == "/sensors/temp"
     assert rec.frames["temp_c"].to_numpy() == pytest.approx(31.5)
-    path = imu_with_temperature(tmp_path / "b.mcap", "/battery/temperature")
+    path = imu_with_temperature(imu_mcap, tmp_path / "b.mcap", "/battery/temperature")
     args = analyze_args(path, tmp_path / "out", "--temperature-topic", "/battery/temperature")
     code, _, err = cli(args)
     assert code == 0, err

@@ -44,7 +44,6 @@ from imupipe.device.frame_schema import (
 )
 from imupipe.io import mcap_scan
 from imupipe.io.decode import decode
-from imupipe.io.mcap_bulk import BulkWriter
 from imupipe.recording.recorder import FrameWriter
 from imupipe.recording.simulator import VirtualADIS16364
 from imupipe.testing.busy_bag import Stream, write_bag
@@ -79,25 +78,6 @@ def imu_stream(n: int = N, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.nd
     rng = np.random.default_rng(seed)
     stamps = 1_700_000_000_000_000_000 + np.arange(n, dtype=np.int64) * 10_000_000
     return stamps, rng.normal(0, 1e-3, (n, 3)), rng.normal(0, 3e-3, (n, 3)) + np.array([0, 0, 9.81])
-
-
-def write_imu_topics(
-    path: Path,
-    streams: dict[str, tuple[np.ndarray, ...]],
-    no_estimate=(False, False),
-    log_ns: np.ndarray | None = None,
-) -> Path:
-    """Imu topics of (header stamps ns, gyro, accel), logged at ``log_ns`` (default: the
-    stamps)."""
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        sid = w.register_schema(IMU_SCHEMA, "ros2msg", b"")
-        for topic, (stamps, gyro, accel) in streams.items():
-            cid = w.register_channel(topic, "cdr", sid)
-            payloads = imu_payloads(stamps, gyro, accel, no_estimate=no_estimate)
-            w.write_chunk(cid, stamps if log_ns is None else log_ns, payloads)
-        w.finish()
-    return path
 
 
 def analyze(path: Path, capsys, *extra: str) -> tuple[int, dict, str]:
@@ -217,11 +197,11 @@ def test_drifting_host_timer(tmp_path: Path, capsys, clean: FrameBlock) -> None:
     assert "stamp jitter is" in w
 
 
-def test_nan_and_inf_values_from_a_ros_driver(tmp_path: Path, capsys) -> None:
+def test_nan_and_inf_values_from_a_ros_driver(tmp_path: Path, capsys, imu_mcap) -> None:
     stamps, gyro, accel = imu_stream()
     gyro[4000, 1] = np.nan
     accel[4001, 2] = np.inf
-    path = write_imu_topics(tmp_path / "f.mcap", {"/imu/data_raw": (stamps, gyro, accel)})
+    path = imu_mcap(tmp_path / "f.mcap", {"/imu/data_raw": (stamps, gyro, accel)})
     code, report, _ = analyze(path, capsys)
     w = warnings_of(report)
     assert code == 0
@@ -232,7 +212,7 @@ def test_nan_and_inf_values_from_a_ros_driver(tmp_path: Path, capsys) -> None:
 
 @pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
 def test_an_axis_nan_in_every_frame_is_not_provided_not_a_bad_frame(
-    tmp_path: Path, capsys, budget: list[str]
+    tmp_path: Path, capsys, budget: list[str], imu_mcap
 ) -> None:
     """A gyro-only unit publishing Imu with NaN accelerations: its gyros are analysed as if
     the accelerometers were finite (in memory and through the spilled columns), and a NaN
@@ -241,8 +221,8 @@ def test_an_axis_nan_in_every_frame_is_not_provided_not_a_bad_frame(
     gyro[4000, 1] = np.nan
     for folder in ("a", "b"):
         (tmp_path / folder).mkdir()
-    with_accel = write_imu_topics(tmp_path / "a" / "f.mcap", {"/imu": (stamps, gyro, accel)})
-    gyro_only = write_imu_topics(
+    with_accel = imu_mcap(tmp_path / "a" / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    gyro_only = imu_mcap(
         tmp_path / "b" / "f.mcap", {"/imu": (stamps, gyro, np.full_like(accel, np.nan))}
     )
     _, expected, _ = analyze(with_accel, capsys, *budget)
@@ -258,12 +238,10 @@ def test_an_axis_nan_in_every_frame_is_not_provided_not_a_bad_frame(
         assert report["axes"][axis]["ieee952"] == expected["axes"][axis]["ieee952"]
 
 
-def test_every_axis_nan_in_every_frame_is_one_line(tmp_path: Path, capsys) -> None:
+def test_every_axis_nan_in_every_frame_is_one_line(tmp_path: Path, capsys, imu_mcap) -> None:
     stamps, gyro, _ = imu_stream(3000)
     nan = np.full_like(gyro, np.nan)
-    code, _, err = analyze(
-        write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps, nan, nan)}), capsys
-    )
+    code, _, err = analyze(imu_mcap(tmp_path / "f.mcap", {"/imu": (stamps, nan, nan)}), capsys)
     assert code == 2
     assert err.count("\n") == 1 and "no axis can be analysed: gyro_x is NaN/inf" in err
 
@@ -277,14 +255,14 @@ def test_every_axis_nan_in_every_frame_is_one_line(tmp_path: Path, capsys) -> No
     ],
 )
 def test_accelerations_in_g_or_not_at_rest_are_warned(
-    tmp_path: Path, capsys, scale: float, offset: float, says: str | None
+    tmp_path: Path, capsys, scale: float, offset: float, says: str | None, imu_mcap
 ) -> None:
     """A driver publishing Imu accelerations in g (REP 103 says m/s²) would give terms 9.81×
     too small under m/s² labels: the mean specific force, gravity at rest, says so."""
     stamps, gyro, accel = imu_stream(3000)
     accel = accel * scale + np.array([offset, 0.0, 0.0])
     code, report, err = analyze(
-        write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps, gyro, accel)}), capsys
+        imu_mcap(tmp_path / "f.mcap", {"/imu": (stamps, gyro, accel)}), capsys
     )
     assert code == 0
     if says is None:
@@ -295,16 +273,16 @@ def test_accelerations_in_g_or_not_at_rest_are_warned(
 
 @pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
 def test_a_time_window_analyses_what_the_same_frames_alone_give(
-    tmp_path: Path, capsys, budget: list[str]
+    tmp_path: Path, capsys, budget: list[str], imu_mcap
 ) -> None:
     """--start 20 --end -40 on 0..119.99 s: frames 2000..7999 (t = 20..79.99 s) analysed, as if
     they had been recorded alone (in memory and through the spilled columns); the report says so."""
     stamps, gyro, accel = imu_stream()
     for folder in ("whole", "alone"):
         (tmp_path / folder).mkdir()
-    whole = write_imu_topics(tmp_path / "whole" / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    whole = imu_mcap(tmp_path / "whole" / "f.mcap", {"/imu": (stamps, gyro, accel)})
     part = slice(2000, 8000)
-    alone = write_imu_topics(
+    alone = imu_mcap(
         tmp_path / "alone" / "f.mcap", {"/imu": (stamps[part], gyro[part], accel[part])}
     )
     code, windowed, err = analyze(whole, capsys, "--start", "20", "--end", "-40", *budget)
@@ -364,7 +342,7 @@ def test_two_imus_publishing_on_one_topic_are_one_line_not_a_crash(
     assert "'imu_left', 'imu_right'" in err
 
 
-def test_two_imus_half_a_period_apart_are_analysed_with_a_warning(tmp_path: Path, capsys):
+def test_two_imus_half_a_period_apart_are_analysed_with_a_warning(tmp_path: Path, capsys, imu_mcap):
     """5 ms apart, the two streams look like one at 200 Hz (and give a mixture's terms): the
     frames the topic carries are named in a warning; one IMU per topic gets none."""
     code, report, _ = analyze(two_imus_on_one_topic(tmp_path / "f.mcap", 5), capsys)
@@ -376,14 +354,14 @@ def test_two_imus_half_a_period_apart_are_analysed_with_a_warning(tmp_path: Path
     assert any(w.startswith(warning) for w in report["input"]["warnings"])
     stamps, gyro, accel = imu_stream(3000)
     (tmp_path / "one").mkdir()
-    one = write_imu_topics(tmp_path / "one" / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    one = imu_mcap(tmp_path / "one" / "f.mcap", {"/imu": (stamps, gyro, accel)})
     _, single, _ = analyze(one, capsys)
     assert not any("frames (header.frame_id" in w for w in single["input"]["warnings"])
 
 
-def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> None:
+def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys, imu_mcap) -> None:
     streams = {t: imu_stream(3000, seed=k) for k, t in enumerate(["/imu0/data", "/imu1/data"])}
-    path = write_imu_topics(tmp_path / "f.mcap", streams)
+    path = imu_mcap(tmp_path / "f.mcap", streams)
     code, _, err = analyze(path, capsys)
     assert (
         code == 2 and "several IMU topics, choose one with --topic: /imu0/data, /imu1/data" in err
@@ -395,7 +373,7 @@ def test_several_topics_all_gives_a_report_per_topic(tmp_path: Path, capsys) -> 
         assert report["input"]["topic"] == topic and report["input"]["frames"] == 3000
     # a third topic too short to analyse: the others' reports, then one line and exit 2
     (tmp_path / "three").mkdir()
-    three = write_imu_topics(
+    three = imu_mcap(
         tmp_path / "three" / "f.mcap", {**streams, "/imu2/data": imu_stream(10, seed=2)}
     )
     code, _, err = analyze(three, capsys, "--topic", "all")
@@ -473,7 +451,7 @@ def test_our_frames_written_by_the_mcap_library(
     assert report["axes"]["gyro_z"]["allan"] == expected["axes"]["gyro_z"]["allan"]
 
 
-def test_rosbag2_directory_with_split_files(tmp_path: Path, capsys) -> None:
+def test_rosbag2_directory_with_split_files(tmp_path: Path, capsys, imu_mcap) -> None:
     """metadata.yaml lists the split files in order; they are analysed as one recording."""
     stamps, gyro, accel = imu_stream()
     bag = tmp_path / "bag"
@@ -481,7 +459,7 @@ def test_rosbag2_directory_with_split_files(tmp_path: Path, capsys) -> None:
     names = []
     for k, rows in enumerate(np.array_split(np.arange(N), 3)):
         names.append(f"bag_{k}.mcap")
-        write_imu_topics(bag / names[-1], {"/imu": (stamps[rows], gyro[rows], accel[rows])})
+        imu_mcap(bag / names[-1], {"/imu": (stamps[rows], gyro[rows], accel[rows])})
     (bag / "metadata.yaml").write_text(
         "rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n"
         "  relative_file_paths:\n" + "".join(f"    - {n}\n" for n in names)
@@ -600,16 +578,16 @@ def test_a_ros1_bag_is_named_and_its_conversion_reads_bit_for_bit(tmp_path: Path
         np.testing.assert_array_equal(frames[f"accel_{axis[-1]}"].to_numpy(), accel[:, k])
 
 
-def test_an_imu_without_gyros_and_gravity_removed_is_named_so(tmp_path: Path, capsys) -> None:
+def test_an_imu_without_gyros_and_gravity_removed_is_named_so(
+    tmp_path: Path, capsys, imu_mcap
+) -> None:
     """An orientation filter's Imu: angular velocity 0 in every message (not measured, and not
     marked so with the covariance -1 the message definition asks for: next test) and gravity
     already removed from the accelerations. The gyros are named as not measured rather than
     stuck, and the accelerometers as gravity-removed rather than in a wrong unit; the
     accelerometers are analysed."""
     stamps, gyro, accel = imu_stream()
-    path = write_imu_topics(
-        tmp_path / "f.mcap", {"/imu": (stamps, 0.0 * gyro, accel - accel.mean(0))}
-    )
+    path = imu_mcap(tmp_path / "f.mcap", {"/imu": (stamps, 0.0 * gyro, accel - accel.mean(0))})
     code, report, _ = analyze(path, capsys)
     w = warnings_of(report)
     assert code == 0
@@ -620,12 +598,14 @@ def test_an_imu_without_gyros_and_gravity_removed_is_named_so(tmp_path: Path, ca
     assert set(report["axes"]) == {"accel_x", "accel_y", "accel_z"}
 
 
-def test_gyros_marked_no_estimate_are_left_out_as_the_message_says(tmp_path: Path, capsys) -> None:
+def test_gyros_marked_no_estimate_are_left_out_as_the_message_says(
+    tmp_path: Path, capsys, imu_mcap
+) -> None:
     """The same gyro-less driver following sensor_msgs/msg/Imu.msg: its angular velocity's
     covariance starts with -1 ("no estimate"). The gyros are left out as not provided, with the
     mark named, instead of being read as zeros; the accelerometers are analysed."""
     stamps, gyro, accel = imu_stream()
-    path = write_imu_topics(
+    path = imu_mcap(
         tmp_path / "f.mcap", {"/imu": (stamps, 0.0 * gyro, accel)}, no_estimate=(True, False)
     )
     code, report, _ = analyze(path, capsys)
@@ -640,7 +620,7 @@ def test_gyros_marked_no_estimate_are_left_out_as_the_message_says(tmp_path: Pat
 
 @pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
 def test_a_reset_of_the_stamping_clock_is_placed_by_the_log_time(
-    tmp_path: Path, capsys, budget: list[str]
+    tmp_path: Path, capsys, budget: list[str], imu_mcap
 ) -> None:
     """A driver stamping with the sensor's clock restarts after frame 6000, 3 s later, its
     clock from 0.2 s: the stamps jump back by ~560 s. Before session 39 the record read as
@@ -658,10 +638,10 @@ def test_a_reset_of_the_stamping_clock_is_placed_by_the_log_time(
     )
     for folder in ("reset", "never"):
         (tmp_path / folder).mkdir()
-    reset = write_imu_topics(
+    reset = imu_mcap(
         tmp_path / "reset" / "f.mcap", {"/imu": (header_ns, gyro, accel)}, log_ns=log_ns
     )
-    never = write_imu_topics(
+    never = imu_mcap(
         tmp_path / "never" / "f.mcap", {"/imu": (stamps[0] + true_ns, gyro, accel)}, log_ns=log_ns
     )
     code, report, err = analyze(reset, capsys, *budget)
@@ -687,7 +667,9 @@ def test_a_reset_of_the_stamping_clock_is_placed_by_the_log_time(
 
 
 @pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
-def test_a_few_stray_stamps_cost_nothing(tmp_path: Path, capsys, budget: list[str]) -> None:
+def test_a_few_stray_stamps_cost_nothing(
+    tmp_path: Path, capsys, budget: list[str], imu_mcap
+) -> None:
     """One message stamped 0 (a field left unset once), one 5 s early and one 1 h late, among
     12,000 at 100 Hz received with 0-3 ms of latency. Before session 40 the first and last
     read as clock resets, then as steps back: more than half the grid masked, so only the
@@ -703,12 +685,8 @@ def test_a_few_stray_stamps_cost_nothing(tmp_path: Path, capsys, budget: list[st
     strayed[10_000] += 3600 * 10**9
     for folder in ("stray", "clean"):
         (tmp_path / folder).mkdir()
-    stray = write_imu_topics(
-        tmp_path / "stray" / "f.mcap", {"/imu": (strayed, gyro, accel)}, log_ns=log_ns
-    )
-    clean = write_imu_topics(
-        tmp_path / "clean" / "f.mcap", {"/imu": (stamps, gyro, accel)}, log_ns=log_ns
-    )
+    stray = imu_mcap(tmp_path / "stray" / "f.mcap", {"/imu": (strayed, gyro, accel)}, log_ns=log_ns)
+    clean = imu_mcap(tmp_path / "clean" / "f.mcap", {"/imu": (stamps, gyro, accel)}, log_ns=log_ns)
     code, report, err = analyze(stray, capsys, *budget)
     assert code == 0, err
     _, expected, _ = analyze(clean, capsys, *budget)
@@ -726,7 +704,7 @@ def test_a_few_stray_stamps_cost_nothing(tmp_path: Path, capsys, budget: list[st
 
 @pytest.mark.parametrize(("log_time", "host"), [("copied", False), ("zero", True)])
 def test_a_reset_the_log_time_cannot_place_joins_the_runs(
-    tmp_path: Path, capsys, log_time: str, host: bool
+    tmp_path: Path, capsys, log_time: str, host: bool, imu_mcap
 ) -> None:
     """The stamping clock reset after frame 6000 (from ~1.7e9 s to 1 s) in a bag whose log time
     cannot place it: copied from the stamps (it resets too), or left at 0 by its writer; the
@@ -740,7 +718,7 @@ def test_a_reset_the_log_time_cannot_place_joins_the_runs(
     header = stamps + late
     header[6000:] += 10**9 - header[6000] + late[6000]
     log_ns = header if log_time == "copied" else np.zeros(N, np.int64)
-    path = write_imu_topics(tmp_path / "f.mcap", {"/imu": (header, gyro, accel)}, log_ns=log_ns)
+    path = imu_mcap(tmp_path / "f.mcap", {"/imu": (header, gyro, accel)}, log_ns=log_ns)
     code, report, err = analyze(path, capsys)
     assert code == 0, err
     assert warnings_of(report).startswith(
@@ -762,41 +740,37 @@ def test_a_reset_the_log_time_cannot_place_joins_the_runs(
         assert n == pytest.approx((1e-3 if axis.startswith("gyro") else 3e-3) / 10, rel=0.03)
 
 
-def write_host_stamped_temperature(path: Path, n: int, wander_c: float, seed: int) -> Path:
+def write_host_stamped_temperature(
+    imu_mcap, path: Path, n: int, wander_c: float, seed: int
+) -> Path:
     """A bag of ``n`` frames at 100 Hz, the IMU stamped by its own clock (from 5 s after
     power-up), its temperature (1 Hz, a random wander of ``wander_c`` °C a second) by the
-    host's, both received 2 ms late; gyro_x's bias follows the temperature by 1e-3 rad/s/K."""
+    host's, both received 2 ms late, in chunks of 30 s; gyro_x's bias follows the temperature
+    by 1e-3 rad/s/K."""
     sensor_ns = 5 * 10**9 + np.arange(n, dtype=np.int64) * 10_000_000
     host_ns = 1_700_000_000_000_000_000 + np.arange(n, dtype=np.int64) * 10_000_000
     _, gyro, accel = imu_stream(n)
     wander = np.cumsum(np.random.default_rng(seed).normal(0, wander_c, n // 100 + 1))  # 1 Hz
     celsius = 25.0 + np.interp(np.arange(n) / 100, np.arange(len(wander)), wander)
     gyro[:, 0] += 1e-3 * (celsius - 25.0)
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        temp_schema = w.register_schema("sensor_msgs/msg/Temperature", "ros2msg", b"")
-        temp = w.register_channel("/imu/temperature", "cdr", temp_schema)
-        for start in range(0, n, 3000):
-            rows = slice(start, start + 3000)
-            w.write_chunk(
-                imu,
-                host_ns[rows] + 2_000_000,
-                imu_payloads(sensor_ns[rows], gyro[rows], accel[rows]),
-            )
-            each_second = slice(start, start + 3000, 100)
-            w.write_chunk(
-                temp,
-                host_ns[each_second] + 2_000_000,
-                temperature_payloads(host_ns[each_second], celsius[each_second]),
-            )
-        w.finish()
-    return path
+    each_second = slice(0, n, 100)
+    temperature = (
+        "/imu/temperature",
+        host_ns[each_second] + 2_000_000,
+        temperature_payloads(host_ns[each_second], celsius[each_second]),
+    )
+    return imu_mcap(
+        path,
+        {"/imu/data": (sensor_ns, gyro, accel)},
+        log_ns=host_ns + 2_000_000,
+        chunk=3000,
+        temperature=temperature,
+    )
 
 
 @pytest.mark.parametrize("budget", [[], ["--memory-budget-gb", "0.001"]])
 def test_a_temperature_the_host_stamps_still_drives_the_loop(
-    tmp_path: Path, capsys, budget: list[str]
+    tmp_path: Path, capsys, budget: list[str], imu_mcap
 ) -> None:
     """A temperature stamped by the host's clock and an IMU by the sensor's
     (:func:`write_host_stamped_temperature`, 2 min, a wander of 1 °C a second). Before
@@ -804,7 +778,7 @@ def test_a_temperature_the_host_stamps_still_drives_the_loop(
     last one and the loop could not see the effect. Both are now placed by their log time, in
     memory and on the low-memory path (whose conditioning says so too), and the loop finds the
     effect with the coefficient."""
-    path = write_host_stamped_temperature(tmp_path / "f.mcap", N, 1.0, 5)
+    path = write_host_stamped_temperature(imu_mcap, tmp_path / "f.mcap", N, 1.0, 5)
     code, report, err = analyze(path, capsys, "--loop", *budget)
     assert code == 0, err
     assert report["input"]["warnings"][0] == (
@@ -819,7 +793,7 @@ def test_a_temperature_the_host_stamps_still_drives_the_loop(
     assert 0.5e-3 < lo <= 1e-3 <= hi < 2e-3  # (wide: the ramp shares part of the trend)
 
 
-def test_a_fast_temperature_is_corrected_unfiltered(tmp_path: Path, capsys) -> None:
+def test_a_fast_temperature_is_corrected_unfiltered(tmp_path: Path, capsys, imu_mcap) -> None:
     """A temperature that wanders 0.2 °C a second (5 min; :func:`write_host_stamped_temperature`)
     moves within the coupling's low-pass window (31 blocks, 18 s here). Before session 41 the
     loop corrected only the low-passed level: the wander within the window stayed in the
@@ -829,7 +803,7 @@ def test_a_fast_temperature_is_corrected_unfiltered(tmp_path: Path, capsys) -> N
     (``effects.read_noise_dominates``), and the corrected curve takes the change below one block
     and between block factors (``loop._Axis.corrected_avar``): the coefficient to ±2 %, K
     unresolved (its truth is 0), both errors fall."""
-    path = write_host_stamped_temperature(tmp_path / "f.mcap", 30_000, 0.2, 2)
+    path = write_host_stamped_temperature(imu_mcap, tmp_path / "f.mcap", 30_000, 0.2, 2)
     code, report, err = analyze(path, capsys, "--loop")
     assert code == 0, err
     gyro_x = report["axes"]["gyro_x"]
@@ -848,23 +822,16 @@ def test_a_fast_temperature_is_corrected_unfiltered(tmp_path: Path, capsys) -> N
 
 
 def write_imu_and_temperature(
-    path: Path, imu: tuple[np.ndarray, ...], temp_ns: np.ndarray, celsius: np.ndarray
+    imu_mcap, path: Path, imu: tuple[np.ndarray, ...], temp_ns: np.ndarray, celsius: np.ndarray
 ) -> Path:
     """``/imu/data`` (stamps ns, gyro, accel; logged at the stamps) and ``/imu/temperature``
     (°C at ``temp_ns``), one chunk each."""
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        cid = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        temp_schema = w.register_schema("sensor_msgs/msg/Temperature", "ros2msg", b"")
-        temp = w.register_channel("/imu/temperature", "cdr", temp_schema)
-        w.write_chunk(cid, imu[0], imu_payloads(*imu))
-        w.write_chunk(temp, temp_ns, temperature_payloads(temp_ns, celsius))
-        w.finish()
-    return path
+    temperature = ("/imu/temperature", temp_ns, temperature_payloads(temp_ns, celsius))
+    return imu_mcap(path, {"/imu/data": imu}, temperature=temperature)
 
 
 @pytest.mark.parametrize("curvature", [0.0, 3e-5])
-def test_a_curved_temperature_coupling(tmp_path: Path, capsys, curvature: float) -> None:
+def test_a_curved_temperature_coupling(tmp_path: Path, capsys, curvature: float, imu_mcap) -> None:
     """gyro_x's bias 1e-4 (T − 25) + c₂ (T − 25)² rad/s while the lab cycles 25 ± 3 °C every
     20 min (30 min at 100 Hz; the temperature at 1 Hz to 0.01 °C): with c₂ = 3e-5 rad/s/°C²
     the coupling is found with its curvature, each coefficient's interval holding the truth
@@ -878,7 +845,11 @@ def test_a_curved_temperature_coupling(tmp_path: Path, capsys, curvature: float)
     gyro[:, 0] += 1e-4 * (celsius - 25) + curvature * (celsius - 25) ** 2
     each = slice(0, n, 100)
     path = write_imu_and_temperature(
-        tmp_path / "f.mcap", (stamps, gyro, accel), stamps[each], np.round(celsius[each], 2)
+        imu_mcap,
+        tmp_path / "f.mcap",
+        (stamps, gyro, accel),
+        stamps[each],
+        np.round(celsius[each], 2),
     )
     code, report, err = analyze(path, capsys, "--loop")
     assert code == 0, err
@@ -898,7 +869,9 @@ def test_a_curved_temperature_coupling(tmp_path: Path, capsys, curvature: float)
     assert all(not a["effects"] for axis, a in report["axes"].items() if axis != "gyro_x")
 
 
-def test_a_bias_that_follows_the_temperature_through_a_thermal_lag(tmp_path: Path, capsys) -> None:
+def test_a_bias_that_follows_the_temperature_through_a_thermal_lag(
+    tmp_path: Path, capsys, imu_mcap
+) -> None:
     """gyro_x's bias follows a lab's 25 → 26.5 °C with a 1 °C, 30 min cycle through a
     first-order lag of 600 s (the bag's temperature read beside the sensor, which the heat
     reaches later), 3e-4 rad/s/°C, 1 h at 100 Hz: one coupling, its lag estimated (572 s) with
@@ -913,7 +886,9 @@ def test_a_bias_that_follows_the_temperature_through_a_thermal_lag(tmp_path: Pat
     gyro[:, 0] += 3e-4 * (die - 25)
     each = slice(0, n, 100)
     read = np.round(celsius[each], 2)
-    path = write_imu_and_temperature(tmp_path / "f.mcap", (stamps, gyro, accel), stamps[each], read)
+    path = write_imu_and_temperature(
+        imu_mcap, tmp_path / "f.mcap", (stamps, gyro, accel), stamps[each], read
+    )
     code, report, err = analyze(path, capsys, "--loop")
     assert code == 0, err
     gyro_x = report["axes"]["gyro_x"]
@@ -929,7 +904,7 @@ def test_a_bias_that_follows_the_temperature_through_a_thermal_lag(tmp_path: Pat
 
 @pytest.mark.parametrize(("resolution", "width"), [(0.25, 0.07), (1.0, 0.75)])
 def test_a_temperature_read_in_steps_is_read_through_them(
-    tmp_path: Path, capsys, resolution: float, width: float
+    tmp_path: Path, capsys, resolution: float, width: float, imu_mcap
 ) -> None:
     """A bag's temperature in 0.25 (or 1) °C steps at 1 Hz while the lab warms 25 → 26.5 °C
     with a 1 °C, 30 min cycle, gyro_x's bias following it by 3e-4 rad/s/°C (1 h at 100 Hz):
@@ -946,7 +921,9 @@ def test_a_temperature_read_in_steps_is_read_through_them(
     gyro[:, 0] += 3e-4 * (celsius - 25)
     each = slice(0, n, 100)
     read = np.round(celsius[each] / resolution) * resolution
-    path = write_imu_and_temperature(tmp_path / "f.mcap", (stamps, gyro, accel), stamps[each], read)
+    path = write_imu_and_temperature(
+        imu_mcap, tmp_path / "f.mcap", (stamps, gyro, accel), stamps[each], read
+    )
     code, report, err = analyze(path, capsys, "--loop")
     assert code == 0, err
     gyro_x = report["axes"]["gyro_x"]
@@ -962,7 +939,7 @@ def test_a_temperature_read_in_steps_is_read_through_them(
 
 @pytest.mark.parametrize("bad", ["nan", "inf", "every"])
 def test_temperature_messages_that_are_not_numbers_leave_it_unknown(
-    tmp_path: Path, capsys, bad: str
+    tmp_path: Path, capsys, bad: str, imu_mcap
 ) -> None:
     """A driver publishing NaN (or inf) for a temperature it cannot read: the temperature is
     unknown (null) between those messages' neighbours, with a warning, and the loop reads the
@@ -976,7 +953,7 @@ def test_temperature_messages_that_are_not_numbers_leave_it_unknown(
     dropped = {"nan": [7, 8, 50], "inf": [30], "every": list(range(n // 100))}[bad]
     sent[dropped] = np.nan if bad != "inf" else np.inf
     path = write_imu_and_temperature(
-        tmp_path / "f.mcap", (stamps, gyro, accel), stamps[::100], sent
+        imu_mcap, tmp_path / "f.mcap", (stamps, gyro, accel), stamps[::100], sent
     )
     rec = decode(path)
     said = [w for w in rec.warnings if "NaN or infinite" in w]
@@ -1005,14 +982,14 @@ def test_temperature_messages_that_are_not_numbers_leave_it_unknown(
 
 
 def test_an_imu_topic_whose_only_chunk_is_over_the_budget_says_why(
-    tmp_path: Path, capsys, monkeypatch
+    tmp_path: Path, capsys, monkeypatch, imu_mcap
 ) -> None:
     """A writer that put the whole IMU topic in one chunk larger than the memory budget lets
     a chunk take: the one-line error says the chunk was skipped and which option raises it,
     not only that the topic has no readable messages."""
     monkeypatch.setattr(mcap_scan, "MIN_CHUNK_LIMIT", 100_000)  # the 0.9 MB chunk is too big
     stamps, gyro, accel = imu_stream(3000)
-    path = write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    path = imu_mcap(tmp_path / "f.mcap", {"/imu": (stamps, gyro, accel)})
     code, _, err = analyze(path, capsys, "--memory-budget-gb", "0.001")
     assert code == 2 and err.count("\n") == 1
     assert err.startswith(f"imupipe: error: {path}: topic /imu has no readable messages (a chunk")
@@ -1020,11 +997,11 @@ def test_an_imu_topic_whose_only_chunk_is_over_the_budget_says_why(
 
 
 @pytest.mark.parametrize("n", [15, 16])
-def test_sixteen_frames_are_the_fewest_analysed(tmp_path: Path, capsys, n: int) -> None:
+def test_sixteen_frames_are_the_fewest_analysed(tmp_path: Path, capsys, n: int, imu_mcap) -> None:
     """MIN_FRAMES: 16 consecutive clean frames give the shortest averaging times; 15 are one
     clear line and exit 2."""
     stamps, gyro, accel = imu_stream(n)
-    path = write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps, gyro, accel)})
+    path = imu_mcap(tmp_path / "f.mcap", {"/imu": (stamps, gyro, accel)})
     code, report, err = analyze(path, capsys)
     if n == 15:
         assert code == 2 and err == (
@@ -1036,7 +1013,7 @@ def test_sixteen_frames_are_the_fewest_analysed(tmp_path: Path, capsys, n: int) 
 
 
 def test_mean_and_rms_are_the_received_frames_whatever_masks_the_rest(
-    tmp_path: Path, capsys
+    tmp_path: Path, capsys, imu_mcap
 ) -> None:
     """1 % of the messages lost one by one (short holes, bridged at long tau) and 50 in a row
     (a gap, masked): each axis' mean and rms are those of the frames received, not of the
@@ -1044,7 +1021,7 @@ def test_mean_and_rms_are_the_received_frames_whatever_masks_the_rest(
     stamps, gyro, accel = imu_stream()
     keep = np.random.default_rng(4).random(N) > 0.01
     keep[6000:6050] = False
-    path = write_imu_topics(tmp_path / "f.mcap", {"/imu": (stamps[keep], gyro[keep], accel[keep])})
+    path = imu_mcap(tmp_path / "f.mcap", {"/imu": (stamps[keep], gyro[keep], accel[keep])})
     code, report, err = analyze(path, capsys)
     assert code == 0, err
     assert "are read by the Allan variance as their fill" in warnings_of(report)  # bridged

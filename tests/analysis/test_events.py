@@ -16,8 +16,6 @@ from scipy import special
 
 import imupipe
 from imupipe.analysis import events as ev
-from imupipe.io.mcap_bulk import BulkWriter
-from imupipe.testing.ros_cdr import imu_payloads
 from imupipe.vocab import AXES
 
 SCHEMA = Path(__file__).resolve().parents[2] / "schemas" / "report.schema.json"
@@ -62,39 +60,31 @@ def with_bump(y: np.ndarray) -> np.ndarray:
     return y
 
 
-def write_mcap(path: Path, y: np.ndarray, lost: slice = slice(0, 0)) -> Path:
+def write_mcap(imu_mcap, path: Path, y: np.ndarray, lost: slice = slice(0, 0)) -> Path:
     """An Imu MCAP of ``y`` at 100 Hz without the frames ``lost`` (a gap)."""
     stamps = 1_700_000_000_000_000_000 + np.arange(len(y), dtype=np.int64) * 10_000_000
     keep = np.ones(len(y), dtype=bool)
     keep[lost] = False
     stamps, y = stamps[keep], y[keep]
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        sid = w.register_schema("sensor_msgs/msg/Imu", "ros2msg", b"")
-        cid = w.register_channel("/imu", "cdr", sid)
-        for i in range(0, len(y), 1 << 16):
-            s = slice(i, i + (1 << 16))
-            w.write_chunk(cid, stamps[s], imu_payloads(stamps[s], y[s, :3], y[s, 3:]))
-        w.finish()
-    return path
+    return imu_mcap(path, {"/imu": (stamps, y[:, :3], y[:, 3:])}, chunk=1 << 16)
 
 
-def analysed(tmp: Path, y: np.ndarray, events: bool = True) -> dict:
-    path = write_mcap(tmp / "imu.mcap", y)
+def analysed(imu_mcap, tmp: Path, y: np.ndarray, events: bool = True) -> dict:
+    path = write_mcap(imu_mcap, tmp / "imu.mcap", y)
     out = tmp / f"out_{events}"
     imupipe.analyze(path, out, rrd=False, figures=False, loop=False, events=events)
     return json.loads((out / "report.json").read_text())
 
 
 @pytest.fixture(scope="module")
-def reports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
+def reports(tmp_path_factory: pytest.TempPathFactory, imu_mcap) -> dict[str, dict]:
     """report.json of the same noise: clean, with the bump, with the bump and no event search."""
     y = noise(7)
     bumped = with_bump(y)
     return {
-        "clean": analysed(tmp_path_factory.mktemp("clean"), y),
-        "bump": analysed(tmp_path_factory.mktemp("bump"), bumped),
-        "bump_kept": analysed(tmp_path_factory.mktemp("kept"), bumped, events=False),
+        "clean": analysed(imu_mcap, tmp_path_factory.mktemp("clean"), y),
+        "bump": analysed(imu_mcap, tmp_path_factory.mktemp("bump"), bumped),
+        "bump_kept": analysed(imu_mcap, tmp_path_factory.mktemp("kept"), bumped, events=False),
     }
 
 
@@ -148,11 +138,15 @@ def test_the_bump_is_excised_on_every_axis_and_the_terms_return_to_the_clean_one
         assert adev["bump"][k] == pytest.approx(adev["clean"][k], rel=0.03)
 
 
-def test_a_gap_and_an_event_are_both_left_out_of_the_allan_sums(reports, tmp_path) -> None:
+def test_a_gap_and_an_event_are_both_left_out_of_the_allan_sums(
+    reports, tmp_path, imu_mcap
+) -> None:
     """The bumped recording without 1 s of frames at 600 s (masked by the default gap
     policy): the same bump is found and excised, and every axis' Allan sums lose the terms
     that touch either the event or the gap."""
-    path = write_mcap(tmp_path / "imu.mcap", with_bump(noise(7)), lost=slice(60_000, 60_100))
+    path = write_mcap(
+        imu_mcap, tmp_path / "imu.mcap", with_bump(noise(7)), lost=slice(60_000, 60_100)
+    )
     imupipe.analyze(path, tmp_path / "out", rrd=False, figures=False, loop=False)
     doc = json.loads((tmp_path / "out" / "report.json").read_text())
     clean = reports["clean"]
@@ -168,26 +162,28 @@ def test_a_gap_and_an_event_are_both_left_out_of_the_allan_sums(reports, tmp_pat
         np.testing.assert_array_equal(lost[small], (k + 2 * m - 1 + 100 + 2 * m - 1)[small])
 
 
-def test_clean_recording_yields_no_event_and_unchanged_numbers(reports, tmp_path) -> None:
+def test_clean_recording_yields_no_event_and_unchanged_numbers(reports, tmp_path, imu_mcap) -> None:
     clean = reports["clean"]
     assert clean["events"]["found"] == [] and clean["events"]["excised_samples"] == 0
     assert clean["events"]["detector"]["tests"] > 10_000
     common = clean["events"]["common_mode"]  # independent axes: no pair moves together
     assert common["pairs"] == []
     assert common["tests"] == 15 * len(clean["events"]["detector"]["scales"])
-    off = analysed(tmp_path, noise(7), events=False)
+    off = analysed(imu_mcap, tmp_path, noise(7), events=False)
     assert "events" not in off
     for name in AXES:
         assert clean["axes"][name]["allan"] == off["axes"][name]["allan"]
 
 
-def test_accelerometers_sharing_a_wander_are_reported_as_moving_together(tmp_path) -> None:
+def test_accelerometers_sharing_a_wander_are_reported_as_moving_together(
+    tmp_path, imu_mcap
+) -> None:
     """The three accelerometers share a white + flicker series as large as their own noise
     (pair correlation ~0.5 at every window): report.json names their three pairs and no other,
     report.md tabulates them, and the warning says so."""
     y = noise(7)
     y[:, 3:] += noise(8)[:, :1] * (N_TRUE[3] / N_TRUE[0])
-    path = write_mcap(tmp_path / "imu.mcap", y)
+    path = write_mcap(imu_mcap, tmp_path / "imu.mcap", y)
     out = tmp_path / "out"
     imupipe.analyze(path, out, rrd=False, figures=False, loop=False)
     doc = json.loads((out / "report.json").read_text())
@@ -515,7 +511,7 @@ def test_hull_spans_the_shortest_flagged_windows_and_reaches_an_end_from_its_unt
 
 
 def test_a_robot_carried_for_its_first_minute_gives_the_terms_of_the_rest(
-    reports, tmp_path
+    reports, tmp_path, imu_mcap
 ) -> None:
     """The first 60 s moved (0.4 rad/s, 1.5 m/s² swings), then 39 min at rest: the whole
     minute is excised and N is that of the clean record (it came out 100× too large)."""
@@ -523,7 +519,7 @@ def test_a_robot_carried_for_its_first_minute_gives_the_terms_of_the_rest(
     t = np.arange(6000) / RATE_HZ
     for j in range(6):
         y[:6000, j] += (0.4 if j < 3 else 1.5) * np.sin(2 * np.pi * (0.3 + 0.1 * j) * t + j)
-    doc = analysed(tmp_path, y)
+    doc = analysed(imu_mcap, tmp_path, y)
     (event,) = doc["events"]["found"]
     assert event["start_s"] == 0.0 and event["duration_s"] == pytest.approx(60.0, abs=1.0)
     assert event["excised"]["start_s"] == 0.0
@@ -585,21 +581,25 @@ def test_overlapping_intervals_are_grouped_chained_and_touching() -> None:
     assert [g.tolist() for g in ev.overlapping_groups([3, 3, 3], [4, 4, 4])] == [[0, 1, 2]]
 
 
-def test_without_the_event_search_a_stuck_axis_is_still_named_and_left_out(tmp_path) -> None:
+def test_without_the_event_search_a_stuck_axis_is_still_named_and_left_out(
+    tmp_path, imu_mcap
+) -> None:
     """``events=False``: no first pass finds the stuck axes, so the analysis' own pass does —
     the same warning and the same axes as with the search (2 min of white noise, accel_y
     constant)."""
     y = np.random.default_rng(3).normal(0.0, 1e-3, (12_000, 6))
     y[:, 4] = 0.25
     for events in (True, False):
-        doc = analysed(tmp_path, y, events=events)
+        doc = analysed(imu_mcap, tmp_path, y, events=events)
         assert doc["input"]["warnings"] == [
             "accel_y is constant over the segment (stuck channel?): it is not analysed"
         ]
         assert sorted(doc["axes"]) == sorted(set(AXES) - {"accel_y"})
 
 
-def test_a_spike_inside_an_excised_event_is_excised_with_it_not_as_an_outlier(tmp_path) -> None:
+def test_a_spike_inside_an_excised_event_is_excised_with_it_not_as_an_outlier(
+    tmp_path, imu_mcap
+) -> None:
     """The bumped recording with a 30-sigma spike on gyro_y inside the bump: the event's fill
     replaces it, so no outlier is excised from the filled series (the first pass' outlier
     search, made on the series with the event in it, is not reused for it)."""
@@ -607,7 +607,7 @@ def test_a_spike_inside_an_excised_event_is_excised_with_it_not_as_an_outlier(tm
     at = int((BUMP["start_s"] + 5.0) * RATE_HZ)
     j = AXES.index("gyro_y")
     y[at, j] += 30 * N_TRUE[j] * np.sqrt(RATE_HZ)
-    doc = analysed(tmp_path, y)
+    doc = analysed(imu_mcap, tmp_path, y)
     (found,) = doc["events"]["found"]
     assert found["excised"]["start_s"] < at / RATE_HZ < found["excised"]["stop_s"]
     assert "outliers" not in doc["axes"]["gyro_y"]

@@ -325,32 +325,24 @@ print(json.dumps({k: v for k, v in after.items() if v != before.get(k, [])}))
 
 
 def test_compile_kernels_leaves_nothing_for_a_long_gapped_analysis_to_compile(
-    tmp_path: Path,
+    tmp_path: Path, imu_mcap
 ) -> None:
     """What the low-memory path and the benchmarks load before analysing
     (:func:`imupipe.analysis.analyze.compile_kernels`) is every kernel, with every type, that
     an analysis calls from Python: here of 6 min at 1 kHz (the noise identification's window of
     averages, the long-record statistics) with a masked gap (the gap-tolerant sums)."""
-    from imupipe.io.mcap_bulk import BulkWriter
-    from imupipe.testing.ros_cdr import imu_payloads
-
     n = 360_000
     rng = np.random.default_rng(3)
     stamps = 1_700_000_000_000_000_000 + np.arange(n, dtype=np.int64) * 1_000_000
     keep = np.ones(n, dtype=bool)
     keep[200_000:200_050] = False
-    path = tmp_path / "f.mcap"
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        cid = w.register_channel(
-            "/imu", "cdr", w.register_schema("sensor_msgs/msg/Imu", "ros2msg", b"")
-        )
-        for a in range(0, n, 1 << 16):
-            part = np.flatnonzero(keep[a : a + (1 << 16)]) + a
-            gyro = rng.normal(0, 1e-3, (part.size, 3))
-            accel = rng.normal(0, 1e-2, (part.size, 3)) + np.array([0.0, 0.0, 9.81])
-            w.write_chunk(cid, stamps[part], imu_payloads(stamps[part], gyro, accel))
-        w.finish()
+    sizes = [int(keep[a : a + (1 << 16)].sum()) for a in range(0, n, 1 << 16)]  # a chunk each
+    gyro, accel = [], []
+    for size in sizes:  # drawn chunk by chunk
+        gyro.append(rng.normal(0, 1e-3, (size, 3)))
+        accel.append(rng.normal(0, 1e-2, (size, 3)) + np.array([0.0, 0.0, 9.81]))
+    imu = (stamps[keep], np.concatenate(gyro), np.concatenate(accel))
+    path = imu_mcap(tmp_path / "f.mcap", {"/imu": imu}, chunk=sizes)
     done = subprocess.run(
         [sys.executable, "-c", COMPLETE, str(path), str(tmp_path / "out")],
         capture_output=True, text=True, timeout=900, check=False,

@@ -28,9 +28,9 @@ from imupipe.device.frame_schema import (
     message_definition,
 )
 from imupipe.errors import InputError
-from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, decode, scan
+from imupipe.io.decode import decode, scan
 from imupipe.io.mcap_bulk import BulkWriter
-from imupipe.testing.ros_cdr import imu_payloads, temperature_payloads
+from imupipe.testing.ros_cdr import temperature_payloads
 from imupipe.vocab import AXES
 
 T0 = 1_700_000_000_000_000_000
@@ -308,23 +308,23 @@ def test_imu_temperature_is_its_own_interpolated(
     assert sub.columns == ["gyro_x", "temp_c"] and sub.equals(f.select("gyro_x", "temp_c"))
 
 
-def test_an_empty_frame_id_pairs_the_imu_with_no_temperature_elsewhere(tmp_path: Path) -> None:
+def test_an_empty_frame_id_pairs_the_imu_with_no_temperature_elsewhere(
+    tmp_path: Path, imu_mcap
+) -> None:
     """An Imu topic and a Temperature topic in another namespace, both with an empty
     header.frame_id: an empty frame_id names no device, so the temperature (another device's)
     is not used, and none is named."""
     stamps = T0 + np.arange(50, dtype=np.int64) * 10_000_000
-    path = tmp_path / "f.mcap"
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        imu = w.register_channel("/a/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        tmp = w.register_channel(
-            "/b/temp", "cdr", w.register_schema(TEMPERATURE_SCHEMA, "ros2msg", b"")
-        )
-        w.write_chunk(
-            imu, stamps, imu_payloads(stamps, np.zeros((50, 3)), np.zeros((50, 3)), 0.0, "")
-        )
-        w.write_chunk(tmp, stamps[::10], temperature_payloads(stamps[::10], np.full(5, 30.0), ""))
-        w.finish()
+    path = imu_mcap(
+        tmp_path / "f.mcap",
+        {"/a/imu": (stamps, np.zeros((50, 3)), np.zeros((50, 3)))},
+        frame_id="",
+        temperature=(
+            "/b/temp",
+            stamps[::10],
+            temperature_payloads(stamps[::10], np.full(5, 30.0), ""),
+        ),
+    )
     rec = decode(path)
     assert rec.temperature_topic is None and rec.frame_ids == ("",)
     assert rec.frames["temp_c"].null_count() == 50

@@ -11,7 +11,6 @@ what the whole decode gives for those columns.
 
 from __future__ import annotations
 
-import itertools
 import os
 import subprocess
 import sys
@@ -22,38 +21,37 @@ import polars as pl
 import pytest
 
 from imupipe.io import decode as dec
-from imupipe.io.decode import IMU_SCHEMA, TEMPERATURE_SCHEMA, decode
-from imupipe.io.mcap_bulk import BulkWriter
-from imupipe.testing.ros_cdr import imu_payloads, temperature_payloads
+from imupipe.io.decode import decode
+from imupipe.testing.ros_cdr import temperature_payloads
 
 T0_NS = 1_700_000_000_000_000_000
 CHUNK = 2_000
 
 
-def write_bag(path: Path, n: int, stamps_set: bool = True, nan_at: int | None = None) -> Path:
+def write_bag(
+    imu_mcap, path: Path, n: int, stamps_set: bool = True, nan_at: int | None = None
+) -> Path:
     """An Imu bag of ``n`` messages at 1 kHz in chunks of :data:`CHUNK` messages, and one
     Temperature message per chunk.  The samples repeat from chunk to chunk (they compress well:
     the bag stays small; their values do not matter here)."""
     rng = np.random.default_rng(2)
     gyro = rng.integers(-2, 3, (CHUNK, 3)) * 1e-3
     accel = rng.integers(-2, 3, (CHUNK, 3)) * 1e-2 + [0.0, 0.0, 9.81]
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        imu = w.register_channel("/imu/data", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        tmp = w.register_channel(
-            "/imu/temperature", "cdr", w.register_schema(TEMPERATURE_SCHEMA, "ros2msg", b"")
-        )
-        for start in range(0, n, CHUNK):
-            log = T0_NS + np.arange(start, min(start + CHUNK, n), dtype=np.int64) * 1_000_000
-            g, a = gyro[: len(log)].copy(), accel[: len(log)]
-            if nan_at is not None and start <= nan_at < start + len(log):
-                g[nan_at - start, 1] = np.nan
-            stamps = log if stamps_set else np.zeros_like(log)
-            w.write_chunk(imu, log, imu_payloads(stamps, g, a))
-            temp = np.array([20.0 + start / n if start else np.nan])  # first one: NaN → null
-            w.write_chunk(tmp, log[:1], temperature_payloads(log[:1], temp))
-        w.finish()
-    return path
+    gyro, accel = (np.tile(a, (-(-n // CHUNK), 1))[:n] for a in (gyro, accel))
+    if nan_at is not None:
+        gyro[nan_at, 1] = np.nan
+    log = T0_NS + np.arange(n, dtype=np.int64) * 1_000_000
+    first = log[::CHUNK]  # a Temperature message with each chunk's first
+    temp = 20.0 + np.arange(0, n, CHUNK) / n
+    temp[0] = np.nan  # first one: NaN → null
+    stamps = log if stamps_set else np.zeros_like(log)
+    return imu_mcap(
+        path,
+        {"/imu/data": (stamps, gyro, accel)},
+        log_ns=log,
+        chunk=CHUNK,
+        temperature=("/imu/temperature", first, temperature_payloads(first, temp)),
+    )
 
 
 N_BIG = 3_000_000
@@ -90,8 +88,8 @@ print(status("VmHWM:") - before, rec.frames.height)
 
 
 @pytest.fixture(scope="module")
-def big_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_bag(tmp_path_factory.mktemp("mem") / "big.mcap", N_BIG)
+def big_bag(tmp_path_factory: pytest.TempPathFactory, imu_mcap) -> Path:
+    return write_bag(imu_mcap, tmp_path_factory.mktemp("mem") / "big.mcap", N_BIG)
 
 
 @pytest.mark.parametrize(
@@ -135,13 +133,13 @@ SUBSETS = [
 
 @pytest.mark.parametrize("stamps_set", [True, False])
 def test_subsets_equal_the_whole_decode(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stamps_set: bool
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stamps_set: bool, imu_mcap
 ) -> None:
     """Columns grown, t_s and temp_c on the time base: the same values (bit for bit), dtypes
     and nulls as the whole decode, on either time base."""
     monkeypatch.setattr(dec, "_FIRST_MAP_BYTES", 40_000)  # each column grows several times
     monkeypatch.setattr(dec, "_CHUNK", 3_000)  # several steps of the chunked arithmetic
-    path = write_bag(tmp_path / "small.mcap", 21_500, stamps_set, nan_at=7_777)
+    path = write_bag(imu_mcap, tmp_path / "small.mcap", 21_500, stamps_set, nan_at=7_777)
     whole = decode(path)
     assert whole.time_source == ("header.stamp" if stamps_set else "log_time")
     f = whole.frames
@@ -200,7 +198,7 @@ def test_adis_subsets_equal_the_whole_decode(
 
 
 def test_a_topic_is_decoded_16_chunks_or_32768_messages_at_a_time(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, imu_mcap
 ) -> None:
     """The chunks of a topic wait and are decoded together once they hold
     :data:`imupipe.io.decode._DECODE_ROWS` (32 768) messages or are
@@ -221,14 +219,7 @@ def test_a_topic_is_decoded_16_chunks_or_32768_messages_at_a_time(
     stamps = T0_NS + np.arange(n, dtype=np.int64) * 1_000_000
     gyro = np.zeros((n, 3))
     gyro[:, 2] = np.arange(n)
-    payloads = imu_payloads(stamps, gyro, np.zeros((n, 3)))
-    path = tmp_path / "f.mcap"
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        imu = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        for start, stop in itertools.pairwise([0, *itertools.accumulate(chunks)]):
-            w.write_chunk(imu, stamps[start:stop], payloads[start:stop])
-        w.finish()
+    path = imu_mcap(tmp_path / "f.mcap", {"/imu": (stamps, gyro, np.zeros((n, 3)))}, chunk=chunks)
     rec = decode(path, columns=frozenset({"gyro_z"}))
     assert sizes == [1_600, 400 + 40_000, 20_000]
     np.testing.assert_array_equal(rec.frames["gyro_z"].to_numpy(), np.arange(n))

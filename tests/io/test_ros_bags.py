@@ -11,9 +11,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from imupipe.errors import InputError
-from imupipe.io.decode import IMU_SCHEMA, decode
-from imupipe.io.mcap_bulk import BulkWriter
-from imupipe.testing.ros_cdr import imu_payloads
+from imupipe.io.decode import decode
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 T0 = 1_700_000_000_000_000_000
@@ -328,7 +326,7 @@ def test_a_stray_among_fewer_messages_than_its_window(tmp_path: Path) -> None:
     np.testing.assert_array_equal(rec.frames["t_s"].to_numpy(), np.arange(6) / 100)
 
 
-def test_strays_at_both_ends_take_the_log_time_less_the_latency(tmp_path: Path) -> None:
+def test_strays_at_both_ends_take_the_log_time_less_the_latency(tmp_path: Path, imu_mcap) -> None:
     """Stamps on the host's clock (received 3 ms after them, 100 Hz), the first and the last
     left at 0 (a driver stamping before its time was set, and as it stopped): each stray at an
     end has no good neighbour on one side and takes its log time less its neighbours' median
@@ -337,14 +335,11 @@ def test_strays_at_both_ends_take_the_log_time_less_the_latency(tmp_path: Path) 
     true_ns = T0 + np.arange(n, dtype=np.int64) * 10_000_000
     header = true_ns.copy()
     header[[0, -1]] = 0
-    path = tmp_path / "f.mcap"
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        w.write_chunk(
-            cid, true_ns + 3_000_000, imu_payloads(header, np.zeros((n, 3)), np.zeros((n, 3)))
-        )
-        w.finish()
+    path = imu_mcap(
+        tmp_path / "f.mcap",
+        {"/imu": (header, np.zeros((n, 3)), np.zeros((n, 3)))},
+        log_ns=true_ns + 3_000_000,
+    )
     rec = decode(path)
     assert rec.time_source == "header.stamp"
     np.testing.assert_array_equal(rec.frames["t_s"].to_numpy(), np.arange(n) / 100)
@@ -431,22 +426,21 @@ def test_a_message_recorded_twice_is_read_once(tmp_path: Path) -> None:
     ]
 
 
-def test_a_repeat_across_decoded_batches_is_found(tmp_path: Path) -> None:
+def test_a_repeat_across_decoded_batches_is_found(tmp_path: Path, imu_mcap) -> None:
     """The first message of a chunk repeating the last of the chunk before, where the decoder
     takes the two chunks in separate batches (40,000 messages each)."""
     n = 60_000
     stamps = T0 + np.arange(n, dtype=np.int64) * 10_000_000
     gyro = np.zeros((n, 3))
     gyro[:, 1] = np.arange(n)
-    payloads = imu_payloads(stamps, gyro, np.zeros((n, 3)))
-    path = tmp_path / "f.mcap"
-    with open(path, "wb") as f:
-        w = BulkWriter(f, profile="ros2")
-        cid = w.register_channel("/imu", "cdr", w.register_schema(IMU_SCHEMA, "ros2msg", b""))
-        w.write_chunk(cid, stamps[:40_000], payloads[:40_000])
-        second = np.r_[39_999, 40_000:n]
-        w.write_chunk(cid, stamps[second] + 1, payloads[second])
-        w.finish()
+    rows = np.r_[:40_000, 39_999, 40_000:n]  # the second chunk starts with message 39,999 again
+    log = stamps[rows] + (np.arange(n + 1) >= 40_000)  # logged 1 ns later
+    path = imu_mcap(
+        tmp_path / "f.mcap",
+        {"/imu": (stamps[rows], gyro[rows], np.zeros((n + 1, 3)))},
+        log_ns=log,
+        chunk=40_000,
+    )
     rec = decode(path)
     np.testing.assert_array_equal(rec.frames["gyro_y"].to_numpy(), np.arange(n))
     assert rec.warnings[0].startswith("1 message(s) repeat the one before them byte for byte")
