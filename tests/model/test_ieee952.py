@@ -358,6 +358,35 @@ def test_r_is_released_when_the_deviance_falls_by_phi_chi2_1_at_90(
     assert chosen.rate_ramp_fit is (None if released else free)
 
 
+def test_a_fitted_r_held_at_0_says_by_how_much_the_deviance_fell_and_under_what() -> None:
+    """N + B + K with gamma scatter (seed 1, D/dof 1.054): R fits 3.1e-13 when free, but the
+    deviance falls by only 2.26 with it, under φ·χ²₁(0.90) = 1.0536 × 2.7055 = 2.85, so R is
+    held at 0.  Its reason states both numbers and the test's level, its bound is the free
+    fit's profile bound, and the fit's note names the test."""
+    rng = np.random.default_rng(1)
+    tau = 0.01 * 2.0 ** np.arange(18)
+    edf = 4e6 / 2.0 ** np.arange(18) + 3.0
+    model = ieee952.avar_model(tau, random_walk=1e-3, bias_instability=2e-4, rate_random_walk=4e-5)
+    avar = model * rng.chisquare(edf) / edf
+    free = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf)
+    held = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf, rate_ramp=False)
+    assert free.coef[4] > 0 and free.dispersion == pytest.approx(1.0536, abs=1e-4)
+    fit = ieee952.release_rate_ramp(free, held)
+    assert fit.rate_ramp_fit is free and fit.coef[4] == 0.0
+    assert held.deviance - free.deviance == pytest.approx(2.2577, abs=1e-4)
+    terms = ieee952.terms_from_fit(fit, avar, edf, "gyro")
+    r = terms.rate_ramp
+    assert r.value is None
+    assert r.hi == pytest.approx(np.sqrt(free.profile_interval(avar, edf, 4)[1]), rel=1e-12)
+    assert 2.85 == round(free.dispersion * 2.705543454095404, 2)  # χ²₁(0.90), A&S 26.8: 2.706
+    assert r.reason == (
+        f"not resolved for 0.01 s <= tau <= 1311 s: 95 % upper bound {r.hi:.3g} rad/s^2 "
+        "(profile likelihood); held at 0 in the model: with R fitted the deviance falls by "
+        "2.26, under phi*chi2_1(0.90) = 2.85 (likelihood-ratio test at 5 %)"
+    )
+    assert "rate ramp R held at 0 by the likelihood-ratio test" in terms.fit_note
+
+
 CHI2_1DOF_95 = 3.841458820694124
 
 

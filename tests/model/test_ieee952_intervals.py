@@ -274,6 +274,39 @@ def test_a_negative_short_term_whose_interval_holds_zero_leaves_q_its_bound() ->
     assert q.hi < 0.95 * ieee952.terms_from_fit(alone, avar, edf, "gyro").quantization.hi
 
 
+def test_b_upper_end_is_held_under_the_curves_bound_unless_the_fit_kept_b_above_it() -> None:
+    """Flicker B = 1e-3 dominating the curve's minimum (at 40.96 s; N = 1e-3, K = 4e-5, gamma
+    scatter): B's 95 % upper end is at most the B whose plateau (2 ln2/π) B² reaches the
+    measured AVAR's upper confidence bound.  A bound there allowing B² only half-way up B's
+    profile interval brings the upper end from 1.00752e-3 down to that B, 1.00248e-3, value
+    and lower end unchanged.  A fit whose B already lies above the bound (fit_composite keeps
+    such a B only where the data reject the limit) reports its profile interval unchanged."""
+    tau = 0.01 * 2.0 ** np.arange(18)
+    edf = 4e6 / 2.0 ** np.arange(18) + 3.0
+    model = ieee952.avar_model(tau, random_walk=1e-3, bias_instability=1e-3, rate_random_walk=4e-5)
+    avar = model * np.random.default_rng(1).chisquare(edf) / edf
+    fit = ieee952.fit_composite(tau, avar, edf, cutoff_hz=np.inf)
+    lo, hi = fit.profile_interval(avar, edf, 2)
+    want = [9.876e-4, 9.974e-4, 1.00752e-3]
+    assert np.sqrt([lo, fit.coef[2], hi]) == pytest.approx(want, rel=1e-4)
+    upper = ieee952.avar_upper(avar, edf)
+    at = int(np.argmin(upper))
+    assert tau[at] == 40.96
+    plain = ieee952.terms_from_fit(fit, avar, edf, "gyro", avar_hi=upper)
+    assert plain.bias_instability.hi == pytest.approx(np.sqrt(hi), rel=1e-12)  # bound not reached
+    half = (fit.coef[2] + hi) / 2
+    upper[at] = PLATEAU_AVAR * half  # 1.03 x the measured AVAR there: the least bound
+    assert ieee952.asymptote_caps(tau, upper, 0.01)[2] == pytest.approx(half, rel=1e-12)
+    held = ieee952.terms_from_fit(fit, avar, edf, "gyro", avar_hi=upper)
+    b = held.bias_instability
+    assert (b.value, b.lo) == (plain.bias_instability.value, plain.bias_instability.lo)
+    assert b.hi == pytest.approx(np.sqrt(half), rel=1e-12)
+    assert b.hi == pytest.approx(1.00248e-3, rel=1e-4) and b.reason is None
+    upper[at] = PLATEAU_AVAR * 0.9 * fit.coef[2]  # B's plateau above the bound: kept
+    above = ieee952.terms_from_fit(fit, avar, edf, "gyro", avar_hi=upper).bias_instability
+    assert above == plain.bias_instability
+
+
 def test_negative_short_term_is_reported_as_the_prefilter_with_its_interval() -> None:
     """AVAR = N²/τ − C/τ² (white noise through a low-pass prefilter, module doc) with gamma
     scatter: the 1/τ² column's sign is −1, Q is masked, C = 3 × its coefficient, and the
@@ -310,6 +343,29 @@ def test_fit_start_drops_short_tau_points_that_break_the_model() -> None:
     # starts are tried over the first third of the 16 octave points: up to 5 can be left out
     avar[:5] = 3e-6 / tau[:5]
     assert ieee952.fit_start(tau, avar, np.full_like(tau, 1e4))[0] == 0.32
+
+
+def test_fit_start_note_names_the_points_left_out_and_the_yardstick() -> None:
+    """The note a user reads beside the fitted range: on the exact N²/τ curve "fit from the
+    first tau"; with only the first octave point 3x too high, the fit starts at the second,
+    0.02 s, and the note names 0.01 s as left out, the point whose deviance contribution is
+    significant, the level and φ = 1 from the fit from the last start tried (the sixth octave
+    point, 0.32 s: starts over the first third of 16)."""
+    tau = 0.01 * 2.0 ** np.arange(16)
+    edf = np.full_like(tau, 1e4)
+    assert ieee952.fit_start(tau, 1e-6 / tau, edf) == (
+        0.01,
+        "fit from the first tau: the shortest tau agrees with the model",
+    )
+    avar = 1e-6 / tau
+    avar[0] *= 3.0
+    assert ieee952.fit_start(tau, avar, edf) == (
+        0.02,
+        "fit from tau = 0.02 s: below it the model does not hold (tau = 0.01 s left out; "
+        "deviance contribution above phi*chi2_1(0.999) at 0.01 s, phi = 1 from the fit from "
+        "tau = 0.32 s), i.e. samples correlated over more lags than the white + prefilter model "
+        "holds for (sensor filter, aliasing or a short-period resonance)",
+    )
 
 
 def test_degrees_of_freedom_are_points_minus_parameters() -> None:
