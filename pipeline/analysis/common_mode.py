@@ -28,13 +28,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from itertools import combinations
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from scipy import special
-
-if TYPE_CHECKING:
-    from imupipe.analysis.events import EventDetector
 
 ALPHA = 1e-3
 """Family-wise probability of naming a pair that does not move together (as the detector's
@@ -120,6 +117,19 @@ class CommonMode:
         }
 
 
+class PairCorrelations(Protocol):
+    """What the test reads (:class:`imupipe.analysis.events.EventDetector` has it): the axes,
+    the window lengths (s), each length's degrees of freedom and each axis pair's correlation
+    at each length (C(A, 2) values per length, in :func:`np.triu_indices` order)."""
+
+    axes: tuple[str, ...]
+    scales_s: tuple[float, ...]
+    pair_correlation: tuple[tuple[float, ...], ...]
+
+    @property
+    def dof(self) -> tuple[float, ...]: ...
+
+
 def fisher_p(r: np.ndarray, dof: np.ndarray) -> np.ndarray:
     """Two-sided p-value of correlations ``r`` against 0 with ``dof`` degrees of freedom
     (Fisher's z: atanh(r) √(ν − 3) ~ N(0, 1); 1 where ν ≤ 3)."""
@@ -138,7 +148,7 @@ def critical_correlation(dof: np.ndarray, tests: int, alpha: float = ALPHA) -> n
         return np.where(dof > 3, np.tanh(z / np.sqrt(np.maximum(dof - 3, 0.0))), 1.0)
 
 
-def common_mode(detector: EventDetector, alpha: float = ALPHA) -> CommonMode:
+def common_mode(detector: PairCorrelations, alpha: float = ALPHA) -> CommonMode:
     """The pairs of ``detector.axes`` whose level fluctuations are correlated (module
     docstring), strongest first."""
     pairs = list(combinations(detector.axes, 2))
