@@ -385,9 +385,9 @@ def _events_section(result: AnalysisResult) -> list[str]:
         "them); steps are kept and left to the loop.",
         "",
     ]
-    md += _common_mode_lines(doc["common_mode"])
+    together = _common_mode_lines(doc["common_mode"])
     if not doc["found"]:
-        return [*md, "None found.", ""]
+        return [*md, "None found.", "", *together]
     rows = [
         (
             e["kind"],
@@ -402,7 +402,8 @@ def _events_section(result: AnalysisResult) -> list[str]:
         for e in doc["found"]
     ]
     header = ("kind", "start (s)", "duration (s)", "axes: size (z)", "handling")
-    return [*md, _md_table(header, rows), "", f"Excised: {doc['excised_samples']} samples.", ""]
+    excised = f"Excised: {doc['excised_samples']} samples."
+    return [*md, _md_table(header, rows), "", excised, "", *together]
 
 
 def _common_mode_lines(doc: dict) -> list[str]:

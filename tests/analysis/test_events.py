@@ -199,7 +199,10 @@ def test_accelerometers_sharing_a_wander_are_reported_as_moving_together(
     (warning,) = [w for w in doc["input"]["warnings"] if w.startswith("axes that move together")]
     assert "more pair" not in warning
     md = (out / "report.md").read_text()
-    assert md.count("\n| accel_") == 3 and "### Axes that move together" in md
+    assert md.count("\n| accel_") == 3
+    # a subsection after the events' own lines, inside their section
+    together = md.index("### Axes that move together")
+    assert md.index("None found.") < together < md.index("\n## ", together)
 
 
 # --- the acceptance thresholds, on unit white noise of fine block means ---------------------
