@@ -53,6 +53,7 @@ def _unit_json(outcome: UnitOutcome) -> dict:
     if outcome.report is not None:
         doc["input"] = {k: outcome.report["input"][k] for k in ("topic", "frames", "rate_hz",
                                                                "duration_s")}  # fmt: skip
+        doc["axes_moving_together"] = _moving_together(outcome.report)
         for axis, a in outcome.report["axes"].items():
             doc["axes"][axis] = {
                 "sensor": a["sensor"],
@@ -61,6 +62,31 @@ def _unit_json(outcome: UnitOutcome) -> dict:
                 "effects": a.get("effects", []),
             }
     return doc
+
+
+def _moving_together(report: dict) -> list[dict] | None:
+    """The unit's axis pairs that move together (report.json ``events.common_mode``: axes and
+    strongest correlation), strongest first; None when the event search did not run."""
+    events = report.get("events")
+    if events is None:
+        return None
+    return [
+        {"axes": p["axes"], "strongest": p["strongest"]} for p in events["common_mode"]["pairs"]
+    ]
+
+
+def _moving_together_cell(outcome: UnitOutcome) -> str:
+    """fleet.md's cell: how many pairs move together and the strongest, "none", or "—"."""
+    pairs = None if outcome.report is None else _moving_together(outcome.report)
+    if pairs is None:
+        return "—"
+    if not pairs:
+        return "none"
+    top = pairs[0]
+    return (
+        f"{len(pairs)} pair{'s' * (len(pairs) > 1)} (strongest {'–'.join(top['axes'])} "
+        f"r {top['strongest']['value']:.2f} at {top['strongest']['window_s']:g} s)"
+    )
 
 
 def _stats_json(s: TermStats) -> dict:
@@ -206,7 +232,7 @@ def fleet_markdown(
         "## Units",
         "",
         _md_table(
-            ("unit", "status", "source", "time", "effects found"),
+            ("unit", "status", "source", "time", "effects found", "axes moving together"),
             [
                 (
                     f"[{md_text(o.name)}]({o.name}/report.md)" if o.status == "ok" else o.name,
@@ -223,12 +249,22 @@ def fleet_markdown(
                         )
                     )
                     or "none",
+                    _moving_together_cell(o),
                 )
                 for o in outcomes
             ],
         ),
         "",
     ]
+    searched = [o for o in ok if _moving_together(o.report) is not None]
+    if searched:
+        moving = sum(bool(_moving_together(o.report)) for o in searched)
+        md += [
+            f"Axes that move together (a cause common to them: temperature, supply, the mount; "
+            f"each unit's report.md says which and at what window lengths): {moving} of "
+            f"{len(searched)} units searched.",
+            "",
+        ]
     if failed:
         md += ["## Failed recordings", ""]
         md += [f"- {md_text(o.name)}: {md_text(o.error or '')}" for o in failed] + [""]

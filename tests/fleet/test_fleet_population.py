@@ -337,6 +337,10 @@ def test_fleet_json_with_a_datasheet_and_a_failed_unit_matches_its_schema(tmp_pa
             },
         },
     }
+    top = {"window_s": 64.0, "value": 0.85}
+    pair = {"axes": ["accel_x", "accel_y"], "p_value": 1e-20, "strongest": top,
+            "significant_window_s": [64.0], "correlation": [top]}  # fmt: skip
+    report["events"] = {"common_mode": {"pairs": [pair]}}
     good = UnitOutcome("good", "s3://lot/good.mcap", "ok", None, report, None, 2.5, "h:2")
     curve = {"tau": [1.0], "median": [1e-3], "lo": [float("nan")], "hi": [2e-3], "units": [3]}
     pop = pl.DataFrame({"axis": ["gyro_x"], "unit": ["rad/s"], **curve})
@@ -349,6 +353,10 @@ def test_fleet_json_with_a_datasheet_and_a_failed_unit_matches_its_schema(tmp_pa
                    "effects": [temp]},
     }  # fmt: skip
     assert doc["units"][0]["axes"] == {} and doc["units"][0]["folder"] is None
+    assert doc["units"][1]["axes_moving_together"] == [
+        {"axes": ["accel_x", "accel_y"], "strongest": top}
+    ]
+    assert "axes_moving_together" not in doc["units"][0]  # failed: nothing was searched
     assert schema_errors(doc, schema, schema) == []
     assert doc["population"][0]["datasheet"]["population_pass"] is True
     assert doc["population_adev"]["gyro_x"]["lo"] == [None]  # NaN written as null
@@ -1143,3 +1151,26 @@ def test_each_way_the_local_cluster_fails_to_start_is_one_fleet_error(
     assert str(err.value) == (
         f"the local Dask cluster of 3 worker(s) did not start: {reason} ({hint})"
     )
+
+
+def test_fleet_md_says_which_units_axes_move_together():
+    """The units table: a unit's pairs moving together (how many, the strongest), "none" when
+    the search named none, "—" when it did not run; and a line counting the units."""
+    from imupipe.fleet.report import fleet_markdown
+    from imupipe.fleet.task import UnitOutcome
+
+    def unit(name: str, pairs: list[dict] | None) -> UnitOutcome:
+        report = {"axes": {}, "input": {}}
+        if pairs is not None:
+            report["events"] = {"common_mode": {"pairs": pairs}}
+        return UnitOutcome(name, f"{name}.mcap", "ok", None, report, None, 1.0, "h:1")
+
+    def pair(a: str, b: str, r: float) -> dict:
+        return {"axes": [a, b], "strongest": {"window_s": 64.0, "value": r}}
+
+    moving = [pair("accel_x", "accel_y", 0.85), pair("gyro_x", "accel_z", 0.41)]
+    md = fleet_markdown([unit("u1", moving), unit("u2", []), unit("u3", None)], [], {}, None)
+    rows = [line for line in md.splitlines() if line.startswith("| [u")]
+    assert rows[0].endswith("| none | 2 pairs (strongest accel_x–accel_y r 0.85 at 64 s) |")
+    assert rows[1].endswith("| none | none |") and rows[2].endswith("| none | — |")
+    assert "): 1 of 2 units searched." in md
