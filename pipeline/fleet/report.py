@@ -261,7 +261,7 @@ def fleet_markdown(
         moving = sum(bool(_moving_together(o.report)) for o in searched)
         md += [
             f"Axes that move together (a cause common to them: temperature, supply, the mount; "
-            f"each unit's report.md says which and at what window lengths): {moving} of "
+            f"each unit's report.md says which and at what window lengths): on {moving} of the "
             f"{len(searched)} units searched.",
             "",
         ]

@@ -1173,4 +1173,4 @@ def test_fleet_md_says_which_units_axes_move_together():
     rows = [line for line in md.splitlines() if line.startswith("| [u")]
     assert rows[0].endswith("| none | 2 pairs (strongest accel_x–accel_y r 0.85 at 64 s) |")
     assert rows[1].endswith("| none | none |") and rows[2].endswith("| none | — |")
-    assert "): 1 of 2 units searched." in md
+    assert "): on 1 of the 2 units searched." in md
