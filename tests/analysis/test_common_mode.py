@@ -162,3 +162,23 @@ def test_the_figure_is_drawn_only_when_some_pair_moves_together(tmp_path) -> Non
     drawn = figures.common_mode_figure(result([(0.9, 0.1, 0.6), (0.8, 0.0, 0.2)]), path)
     assert drawn == path and path.stat().st_size > 10_000
     assert figures.common_mode_figure(SimpleNamespace(events=None), path) is None
+
+
+def no_axes(sensor: str) -> list:
+    """A result's ``by_sensor`` with no axis (module level: the forked child gets it pickled)."""
+    return []
+
+
+@pytest.mark.parametrize("processes", [1, 2])
+def test_write_figures_lists_the_figure_under_its_caption(tmp_path, processes) -> None:
+    """Serial or with the accelerometers' figures in a forked child, the figures report.md
+    embeds include common_mode.png, captioned, when some pair moves together."""
+    from types import SimpleNamespace
+
+    from imupipe.report import figures
+
+    found = ev.EventsFound(detector([(0.9, 0.1, 0.6)]), (), 0.01, 0.0)
+    result = SimpleNamespace(events=found, by_sensor=no_axes)
+    written = figures.write_figures(result, tmp_path, processes)
+    assert written == {"Axes that move together": tmp_path / "common_mode.png"}
+    assert (tmp_path / "common_mode.png").exists()
