@@ -460,7 +460,7 @@ def analyze(
             *(stuck_warning(a, why) for a, why in stuck.items()),
             *outlier_warnings(results),
             *filter(None, [specific_force_warning(results)]),
-            *coincident_step_warnings(results),
+            *coincident_step_warnings(results, series.samples * series.tau0_s, t0_stamp_s),
             *(found.warnings() if found is not None else []),
             *source.notes(series.segment.frames, options.rrd, at_once),
         ]

@@ -70,11 +70,16 @@ STEP_KIND = "bias_step"
 """The loop's effect kind of a lasting level change (:mod:`imupipe.model.loop`)."""
 
 
-def coincident_step_warnings(axes: Mapping[str, AxisResult]) -> list[str]:
+def coincident_step_warnings(
+    axes: Mapping[str, AxisResult], duration_s: float, t0_s: float
+) -> list[str]:
     """One warning per instant at which the loops of two or more axes each accepted a bias
     step, their 95 % time intervals (``time_s``, s from the analysed start) overlapping
     (chained: a step overlapping one of the group joins it); the sizes in each axis' SI unit.
-    The steps stay corrected per axis: the warning says they are one event of the unit."""
+    The steps stay corrected per axis: the warning says they are one event of the unit.  Then
+    one line naming the longest part of the analysed ``duration_s`` between those instants'
+    intervals, with the ``--start``/``--end`` that analyse it alone (s from the recording's
+    first frame: ``t0_s`` is the analysed start's)."""
     steps = [
         (*effect.intervals["time_s"], name, effect)
         for name, axis in axes.items()
@@ -86,10 +91,11 @@ def coincident_step_warnings(axes: Mapping[str, AxisResult]) -> list[str]:
         [steps[i] for i in members]
         for members in overlapping_groups([s[0] for s in steps], [s[1] for s in steps])
     ]
-    warnings = []
+    warnings, shifts = [], []
     for group in groups:
         if len({name for _, _, name, _ in group}) < 2:
             continue
+        shifts.append((min(s[0] for s in group), max(s[1] for s in group)))
         times = sorted(effect.params["time_s"] for *_, effect in group)
         sizes = ", ".join(
             f"{name} {effect.params['size']:.3g} {axes[name].unit}"
@@ -102,4 +108,20 @@ def coincident_step_warnings(axes: Mapping[str, AxisResult]) -> list[str]:
             "one shift of the whole unit (a tilt, a bump or a supply change), found by each "
             "axis' loop and corrected on each; the recording was not static there"
         )
-    return warnings
+    return warnings + ([_longest_part(shifts, duration_s, t0_s)] if shifts else [])
+
+
+def _longest_part(shifts: list[tuple[float, float]], duration_s: float, t0_s: float) -> str:
+    """The longest part of [0, ``duration_s``] outside every shift's interval ``shifts``
+    (sorted, disjoint), and the options that analyse it alone."""
+    edges = [0.0, *(x for lo_hi in shifts for x in lo_hi), duration_s]
+    ends = zip(edges[::2], edges[1::2], strict=True)
+    parts = [(max(a, 0.0), min(b, duration_s)) for a, b in ends]
+    a, b = max(parts, key=lambda p: p[1] - p[0])
+    options = " ".join(
+        [f"--start {t0_s + a:.0f}"] * (a > 0) + [f"--end {t0_s + b:.0f}"] * (b < duration_s)
+    )
+    return (
+        f"the longest part between the unit's shifts: {a:.0f}-{b:.0f} s of the analysed "
+        f"{duration_s:.0f} s ({(b - a) / duration_s:.0%}); to analyse it alone: {options}"
+    )

@@ -81,11 +81,13 @@ def test_steps_whose_intervals_overlap_on_several_axes_are_one_warning() -> None
         accel_x=[_step(2020.0, 2010.0, 2030.0, -0.0209)],
         accel_y=[_step(740.0, 730.0, 750.0, 0.0171), _step(2020.0, 2011.0, 2025.0, -0.0126)],
     )
-    assert coincident_step_warnings(axes) == [
+    assert coincident_step_warnings(axes, 10_000.0, 0.0) == [
         "bias steps at the same instant on several axes, 2020 s [2010, 2030] (accel_z "
         "-0.0135 m/s^2, accel_x -0.0209 m/s^2, accel_y -0.0126 m/s^2): one shift of the whole "
         "unit (a tilt, a bump or a supply change), found by each axis' loop and corrected on "
-        "each; the recording was not static there"
+        "each; the recording was not static there",
+        "the longest part between the unit's shifts: 2030-10000 s of the analysed 10000 s "
+        "(80%); to analyse it alone: --start 2030",
     ]
     chained = _looped(
         gyro_x=[_step(100.0, 90.0, 130.0, 1e-4)],
@@ -93,7 +95,7 @@ def test_steps_whose_intervals_overlap_on_several_axes_are_one_warning() -> None
         gyro_z=[_step(125.0, 120.0, 140.0, 3e-4)],  # overlaps gyro_x's only
         accel_x=[_step(145.0, 140.0, 150.0, 0.01)],  # touches gyro_z's
     )
-    (warning,) = coincident_step_warnings(chained)
+    (warning, _) = coincident_step_warnings(chained, 1000.0, 0.0)
     assert warning.startswith(
         "bias steps at the same instant on several axes, 100-145 s [90, 150] (gyro_x 0.0001 "
         "rad/s, gyro_y 0.0002 rad/s, gyro_z 0.0003 rad/s, accel_x 0.01 m/s^2)"
@@ -105,12 +107,12 @@ def test_steps_apart_or_on_one_axis_are_no_warning() -> None:
         accel_x=[_step(1000.0, 990.0, 1010.0, 0.02)],
         accel_y=[_step(1020.0, 1010.5, 1030.0, 0.02)],  # starts after accel_x's ends
     )
-    assert coincident_step_warnings(apart) == []
+    assert coincident_step_warnings(apart, 3000.0, 0.0) == []
     pair = _looped(  # two steps a few seconds apart, inside each other's interval: one instant
         accel_x=[_step(1000.0, 990.0, 1010.0, 0.02)],
         accel_y=[_step(1004.0, 995.0, 1012.0, -0.01)],
     )
-    (warning,) = coincident_step_warnings(pair)
+    (warning, _) = coincident_step_warnings(pair, 3000.0, 0.0)
     assert warning.startswith(
         "bias steps at the same instant on several axes, 1000-1004 s [990, 1012]"
     )
@@ -119,13 +121,37 @@ def test_steps_apart_or_on_one_axis_are_no_warning() -> None:
         gyro_y=[_step(1000.0, 992.0, 1010.0, 1e-4)],
         gyro_z=[_step(1006.0, 996.0, 1016.0, 1e-4)],
     )
-    (warning,) = coincident_step_warnings(three)
+    (warning, _) = coincident_step_warnings(three, 3000.0, 0.0)
     assert warning.startswith(
         "bias steps at the same instant on several axes, 1000-1006 s [990, 1016]"
     )
     one_axis = _looped(accel_x=[_step(1000.0, 990.0, 1010.0, 0.02), _step(1005.0, 1000, 1010, 1)])
-    assert coincident_step_warnings(one_axis) == []
-    assert coincident_step_warnings({"gyro_x": SimpleNamespace(loop=None, unit="rad/s")}) == []
+    assert coincident_step_warnings(one_axis, 3000.0, 0.0) == []
+    no_loop = {"gyro_x": SimpleNamespace(loop=None, unit="rad/s")}
+    assert coincident_step_warnings(no_loop, 3000.0, 0.0) == []
+
+
+def test_the_longest_part_between_the_shifts_and_the_options_that_analyse_it() -> None:
+    """Between two whole-unit shifts (and the record's ends) the longest part, its share and
+    the --start/--end that cut it, on the recording's time base (the analysed start at 100 s);
+    a part reaching an end of the analysed record needs no option there."""
+    middle = _looped(
+        accel_x=[_step(1000.0, 990.0, 1012.0, 0.02), _step(5004.0, 5000.0, 5010.0, 0.01)],
+        accel_y=[_step(1001.0, 992.0, 1010.0, 0.02), _step(5005.0, 5001.0, 5009.0, 0.01)],
+    )
+    *_, part = coincident_step_warnings(middle, 8000.0, 100.0)
+    assert part == (
+        "the longest part between the unit's shifts: 1012-5000 s of the analysed 8000 s "
+        "(50%); to analyse it alone: --start 1112 --end 5100"
+    )
+    *_, first = coincident_step_warnings(middle, 5500.0, 0.0)  # 0-990 vs 1012-5000 vs 5010-
+    assert first.endswith("1012-5000 s of the analysed 5500 s (73%); to analyse it alone: "
+                          "--start 1012 --end 5000")  # fmt: skip
+    early = _looped(
+        gyro_x=[_step(7000.0, 6990.0, 7010.0, 1e-4)], gyro_y=[_step(7000.0, 6995.0, 7005.0, 1e-4)]
+    )
+    *_, before = coincident_step_warnings(early, 8000.0, 0.0)
+    assert before.endswith("0-6990 s of the analysed 8000 s (87%); to analyse it alone: --end 6990")
 
 
 def test_a_simulated_tilt_at_one_instant_is_named_in_the_reports_warnings(tmp_path) -> None:
