@@ -1169,8 +1169,15 @@ def test_fleet_md_says_which_units_axes_move_together():
         return {"axes": [a, b], "strongest": {"window_s": 64.0, "value": r}}
 
     moving = [pair("accel_x", "accel_y", 0.85), pair("gyro_x", "accel_z", 0.41)]
-    md = fleet_markdown([unit("u1", moving), unit("u2", []), unit("u3", None)], [], {}, None)
+    bad = UnitOutcome("u5", "u5.mcap", "failed", "u5.mcap: not MCAP", None, None, 0.2, "h:1")
+    units = [unit("u1", moving), unit("u2", []), unit("u3", None), unit("u4", moving[1:]), bad]
+    md = fleet_markdown(units, [], {}, None)
     rows = [line for line in md.splitlines() if line.startswith("| [u")]
     assert rows[0].endswith("| none | 2 pairs (strongest accel_x–accel_y r 0.85 at 64 s) |")
     assert rows[1].endswith("| none | none |") and rows[2].endswith("| none | — |")
-    assert "): on 1 of the 2 units searched." in md
+    assert rows[3].endswith("| 1 pair (strongest gyro_x–accel_z r 0.41 at 64 s) |")
+    assert "| u5 | failed | u5.mcap | 0.2 s | none | — |" in md  # not linked: no folder
+    assert "): on 2 of the 3 units searched." in md  # the failed unit was not searched
+    assert md.count("u5.mcap: not MCAP") == 1 and "## Failed recordings" in md
+    assert "by —. Outliers" in md  # no tolerance interval computed
+    assert "5 recordings: 4 analysed, 1 failed." in md
