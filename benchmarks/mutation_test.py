@@ -72,6 +72,11 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/io/test_ros_bags.py",
     ),
     "pipeline/analysis/events.py": ("tests/analysis/test_events.py",),
+    "pipeline/analysis/common_mode.py": (
+        "tests/analysis/test_common_mode.py",
+        "tests/analysis/test_events.py",
+        "tests/report/test_report_text.py",
+    ),
     "pipeline/analysis/at_rest.py": ("tests/analysis/test_at_rest.py",),
     "pipeline/io/mcap_scan.py": (
         "tests/io/test_fuzz_decoder.py",
