@@ -615,3 +615,27 @@ def test_a_spike_inside_an_excised_event_is_excised_with_it_not_as_an_outlier(
     assert found["excised"]["start_s"] < at / RATE_HZ < found["excised"]["stop_s"]
     assert "outliers" not in doc["axes"]["gyro_y"]
     assert not any("outlier" in w for w in doc["input"]["warnings"])
+
+
+def test_the_warnings_say_which_events_were_excised_and_which_pairs_move_together() -> None:
+    """One line an event (an excised transient, a step left to the loop), then the axes that
+    move together; the detector's degrees of freedom are 0.95 × J / 2 (206 windows: 97.85)."""
+    det = ev.EventDetector(
+        0.5, (0.5,), (206,), (6.0,), (5.0,), ("accel_x", "accel_y"), ((0.9,),)
+    )  # one test: r 0.9 at 97.85 dof is named
+    assert det.dof == (pytest.approx(97.85, rel=1e-12),)
+    transient = ev.DisturbanceEvent(
+        1200.0, 30.0, ("gyro_y", "accel_x"), {}, {}, {}, "transient", (120_000, 123_000), 8.0
+    )
+    step = ev.DisturbanceEvent(3000.0, 4.5, ("accel_z",), {}, {}, {}, "step", None, 2.0)
+    lines = ev.EventsFound(det, (transient, step), 0.01, 0.0).warnings()
+    assert lines[:2] == [
+        "disturbance event (transient) at 1200.0 s for 30.0 s on gyro_y, accel_x: excised on "
+        "every axis",
+        "disturbance event (step) at 3000.0 s for 4.5 s on accel_z: a lasting level change, left "
+        "to the loop (bias step)",
+    ]
+    assert len(lines) == 3 and lines[2].startswith(
+        "axes that move together: accel_x–accel_y r 0.90 at 0.5 s ("
+    )
+    assert ev.EventsFound(det, (), 0.01, 0.0).warnings() == lines[2:]
