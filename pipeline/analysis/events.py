@@ -54,6 +54,7 @@ Detector (all on :data:`FINE_BLOCK_S` block means of each axis, spikes already r
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from math import comb
 from typing import Literal
@@ -590,9 +591,10 @@ class EventsFound:
     tau0_s: float
     t0_stamp_s: float
 
-    @property
+    @functools.cached_property
     def common_mode(self) -> CommonMode:
-        """The axis pairs whose level fluctuations move together (:mod:`.common_mode`)."""
+        """The axis pairs whose level fluctuations move together (:mod:`.common_mode`; tested
+        once, then read by report.json, the warnings and the figure)."""
         return common_mode(self.detector)
 
     def as_dict(self) -> dict:

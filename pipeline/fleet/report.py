@@ -75,9 +75,9 @@ def _moving_together(report: dict) -> list[dict] | None:
     ]
 
 
-def _moving_together_cell(outcome: UnitOutcome) -> str:
-    """fleet.md's cell: how many pairs move together and the strongest, "none", or "—"."""
-    pairs = None if outcome.report is None else _moving_together(outcome.report)
+def _moving_together_cell(pairs: list[dict] | None) -> str:
+    """fleet.md's cell of a unit's :func:`_moving_together` (None: not searched or failed):
+    how many pairs move together and the strongest, "none", or "—"."""
     if pairs is None:
         return "—"
     if not pairs:
@@ -222,6 +222,7 @@ def fleet_markdown(
 ) -> str:
     """``fleet.md``: units and failures, the population table, the figures."""
     ok = [o for o in outcomes if o.status == "ok"]
+    together = [None if o.report is None else _moving_together(o.report) for o in outcomes]
     failed = [o for o in outcomes if o.status == "failed"]
     methods = sorted({s.method for s in stats if s.method})
     md = [
@@ -249,16 +250,16 @@ def fleet_markdown(
                         )
                     )
                     or "none",
-                    _moving_together_cell(o),
+                    _moving_together_cell(pairs),
                 )
-                for o in outcomes
+                for o, pairs in zip(outcomes, together, strict=True)
             ],
         ),
         "",
     ]
-    searched = [o for o in ok if _moving_together(o.report) is not None]
+    searched = [pairs for pairs in together if pairs is not None]  # a failed unit has no report
     if searched:
-        moving = sum(bool(_moving_together(o.report)) for o in searched)
+        moving = sum(bool(pairs) for pairs in searched)
         md += [
             f"Axes that move together (a cause common to them: temperature, supply, the mount; "
             f"each unit's report.md says which and at what window lengths): on {moving} of the "

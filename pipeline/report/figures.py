@@ -201,9 +201,10 @@ def common_mode_figure(result: AnalysisResult, path: Path) -> Path | None:
     """The correlation of each pair of axes that move together against the window length,
     with the family-wise test's critical |r| (:mod:`imupipe.analysis.common_mode`); None when
     no pair moves together."""
-    if result.events is None or not result.events.common_mode.pairs:
+    found = None if result.events is None else result.events.common_mode
+    if found is None or not found.pairs:
         return None
-    detector, found = result.events.detector, result.events.common_mode
+    detector = result.events.detector
     fig, ax = plt.subplots(figsize=(8, 4.5), gridspec_kw={**_MARGINS, "bottom": 0.12})
     colors = plt.get_cmap("tab20").colors
     styles = {2: "-", 1: "--", 0: ":"}  # accelerometers in the pair: 2, 1 or 0
