@@ -5,22 +5,23 @@
 
 Records ``--units`` simulated recordings at 100 Hz (seeds 0..units-1, kept in ``--dir`` for the
 next run), warms the numba cache with one analysis, then times the sequential loop in this
-process (numba's and polars' default thread pools), and then ``--rounds`` rounds of four runs:
-a loop of the ``imupipe analyze`` command (one process per recording, ``--jobs 1``, one
-thread: what a user runs without a fleet, each process paying its start, imports and numba
-cache loading), the sequential loop in one child process pinned to one core as a fleet worker
-is (``SINGLE_THREAD_ENV``, one axis at a time), ``run_fleet`` on a LocalCluster of 1 worker,
-and of 2 workers (each including cluster start and stop and the fleet report).  Every other
-round runs the four in reverse order, so a machine whose speed drifts (shared cores) biases no
-ratio; the ratios are printed per round.  The fleet's overhead is measured against the
-one-thread loop in one process — the same work on the same single core, without Dask, the
-fleet report or any process start: the strict baseline; each fleet runs in a fresh child
-process, as ``imupipe fleet`` does, its imports untimed like the loop's — and against the loop
-of commands, the issue's literal baseline.  All runs use imupipe analyze's defaults (closed
-loop, figures, recording.rrd).  The load average is printed with every timing: on a shared
-machine the ratios are only as good as the load was steady.  From the 1-worker runs (median
-worker-seconds per unit) it derives what a 1,000-unit fleet of such recordings needs, one
-single-threaded worker per core.
+process (numba's and polars' default thread pools), and then ``--rounds`` rounds of five runs: a
+loop of the ``imupipe analyze`` command (one process per recording, ``--jobs 1``, one thread:
+what a user runs without a fleet, each process paying its start, imports and numba cache
+loading), the sequential loop in one child process pinned to one core as a fleet worker is
+(``SINGLE_THREAD_ENV``, one axis at a time), two such loops side by side over half of the
+recordings each (the machine's own 2-core ceiling, without Dask), ``run_fleet`` on a
+LocalCluster of 1 worker, and of 2 workers (each including cluster start and stop and the fleet
+report). Every other round runs the five in reverse order, so a machine whose speed drifts
+(shared cores) biases no ratio; the ratios are printed per round. The fleet's overhead is
+measured against the one-thread loop in one process — the same work on the same single core,
+without Dask, the fleet report or any process start: the strict baseline; each fleet runs in a
+fresh child process, as ``imupipe fleet`` does, its imports untimed like the loop's — and
+against the loop of commands, the issue's literal baseline. All runs use imupipe analyze's
+defaults (closed loop, figures, recording.rrd). The load average is printed with every timing:
+on a shared machine the ratios are only as good as the load was steady. From the 1-worker runs
+(median worker-seconds per unit) it derives what a 1,000-unit fleet of such recordings needs,
+one single-threaded worker per core.
 """
 
 from __future__ import annotations
@@ -73,6 +74,29 @@ def _one_core_loop(work: Path, paths: list[Path]) -> float:
         env=os.environ | SINGLE_THREAD_ENV, capture_output=True, text=True, check=True,
     )  # fmt: skip
     return float(child.stdout.split()[-1])
+
+
+def _two_loops(work: Path, paths: list[Path]) -> float:
+    """Seconds of two one-thread loops side by side, each over half of the recordings (the
+    longer of the two): what two cores of this machine do with the fleet's work and no Dask
+    at all, the ceiling of the 2-worker fleet's speedup here.  Two analyses side by side slow
+    each other down (shared cache and memory bandwidth; 1-11 % per unit in session 54's
+    pairs), so on two cores the ceiling is under 2x."""
+    children = []
+    for k in (0, 1):
+        command = [sys.executable, "-c", ONE_THREAD_LOOP, str(work / str(k))]
+        children.append(
+            subprocess.Popen(
+                command + [str(p) for p in paths[k::2]],
+                env=os.environ | SINGLE_THREAD_ENV,
+                stdout=subprocess.PIPE,
+                text=True,
+            )
+        )
+    outputs = [child.communicate()[0] for child in children]
+    if any(child.returncode for child in children):
+        raise RuntimeError("a one-thread loop failed")
+    return max(float(out.split()[-1]) for out in outputs)
 
 
 def _command_loop(work: Path, paths: list[Path]) -> float:
@@ -151,6 +175,7 @@ def main() -> None:
         runs = {
             "command": lambda r: _command_loop(work / f"cmd_{r}", paths),
             "loop": lambda r: _one_core_loop(work / f"seq1_{r}", paths),
+            "two loops": lambda r: _two_loops(work / f"seq2_{r}", paths),
             1: lambda r: _fleet(work / f"fleet1_{r}", paths, 1),
             2: lambda r: _fleet(work / f"fleet2_{r}", paths, 2),
         }
@@ -162,6 +187,9 @@ def main() -> None:
                 if name == "loop":
                     print(f"  sequential loop, one thread (as a fleet worker): "
                           f"{timings[name][-1]:.1f} s, {_load()}")  # fmt: skip
+                if name == "two loops":
+                    print(f"  two one-thread loops side by side, half of the units each: "
+                          f"{timings[name][-1]:.1f} s, {_load()}")  # fmt: skip
                 if name == "command":
                     print(f"  loop of the imupipe analyze command, one thread: "
                           f"{timings[name][-1]:.1f} s, {_load()}")  # fmt: skip
@@ -169,6 +197,9 @@ def main() -> None:
         shutil.rmtree(work, ignore_errors=True)
 
     speedups = [one / two for one, two in zip(timings[1], timings[2], strict=True)]
+    ceilings = [a / b for a, b in zip(timings["loop"], timings["two loops"], strict=True)]
+    print("two one-thread loops side by side vs one, per round: "
+          + ", ".join(f"{v:.2f}x" for v in ceilings) + " (this machine's ceiling)")  # fmt: skip
     overheads = [100 * (f / b - 1) for f, b in zip(timings[1], timings["loop"], strict=True)]
     print("speedup 2 vs 1 worker, per round: "
           + ", ".join(f"{v:.2f}x" for v in speedups) + " (target >= 1.8x on 2 cores)")  # fmt: skip

@@ -303,8 +303,6 @@ def write_fleet_report(
     returns the fleet.json document and the population statistics.  The figures are drawn by
     ``mapper`` (:data:`imupipe.fleet.figure_plan.Mapper`; a Dask client's map draws them on the
     fleet's workers while this process writes the rest)."""
-    from imupipe.fleet.rerun_view import write_fleet_rrd
-
     ok = [o for o in outcomes if o.status == "ok"]
     reports = {o.name: o.report for o in ok}
     stats = population(reports, datasheet)
@@ -316,6 +314,10 @@ def write_fleet_report(
     (out_dir / "fleet.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     fleet.write_parquet(out_dir / "fleet.parquet")
     if rrd:
+        # imported here, while the workers draw the figures: rerun takes ~0.5 s to import,
+        # which, imported before the figure jobs were sent, delayed the report's end as much
+        from imupipe.fleet.rerun_view import write_fleet_rrd
+
         write_fleet_rrd(fleet, pop, out_dir / "fleet.rrd")
     figures = save_figures(jobs, pngs, out_dir)
     (out_dir / "fleet.md").write_text(fleet_markdown(outcomes, stats, figures, datasheet))

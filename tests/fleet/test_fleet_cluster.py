@@ -5,6 +5,7 @@ with one worker killed mid-run.  Every server is bound to 127.0.0.1 and stopped 
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import re
@@ -208,6 +209,8 @@ def test_existing_scheduler_survives_a_killed_worker(tmp_path, schema_errors):
         os.kill(pids[victim], signal.SIGKILL)
         survivor = next(a for a in pids if a != victim)
         _, err = fleet.communicate(timeout=600)
+        # the fleet froze no heap of a cluster that outlives it (only the embedded one's)
+        assert client.run(gc.get_freeze_count, workers=[survivor]) == {survivor: 0}
     finally:
         if client is not None:
             client.close()
@@ -316,6 +319,35 @@ def test_the_embedded_cluster_has_the_workers_asked_for_on_127_0_0_1_and_stops(
         assert not link.endswith(":8787/status")
         assert here == {"127.0.0.1"} and list(there.values()) == [{"127.0.0.1"}] * expected
         assert local.status.name == "closed" and client.status == "closed"
+
+
+def test_the_embedded_workers_heaps_are_frozen_just_before_the_cluster_stops(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A worker that has run analyses takes ~0.6-0.9 s to exit (the interpreter's finalization
+    collects its heap): the embedded cluster freezes its workers' heaps (``gc.freeze``) once the
+    fleet's work is done, just before stopping them, and not earlier (a frozen heap is never
+    collected again)."""
+    import gc
+
+    import imupipe.fleet.cluster as cluster
+
+    seen = []
+    real = cluster._freeze_worker_heaps
+
+    def spy(client):
+        before = client.run(gc.get_freeze_count)
+        real(client)
+        seen.append((list(before.values()), list(client.run(gc.get_freeze_count).values())))
+
+    monkeypatch.setattr(cluster, "_freeze_worker_heaps", spy)
+    with cluster.fleet_client(workers=2) as client:
+        assert seen == []
+        assert list(client.run(gc.get_freeze_count).values()) == [0, 0]
+    ((before, after),) = seen
+    assert before == [0, 0]
+    assert len(after) == 2 and min(after) > 10_000  # every object a worker's imports made
+    assert client.status == "closed"
 
 
 def test_embedded_workers_keep_glibc_malloc_trimming_and_run_no_profiler():
