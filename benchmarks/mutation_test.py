@@ -291,6 +291,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/fleet/test_fleet_population.py::test_an_existing_scheduler_is_tried_for_10_s_and_its_workers_awaited_60_s",
         "tests/fleet/test_fleet_population.py::test_each_way_the_local_cluster_fails_to_start_is_one_fleet_error",
         "tests/fleet/test_fleet_cluster.py::test_the_embedded_cluster_has_the_workers_asked_for_on_127_0_0_1_and_stops",
+        "tests/fleet/test_fleet_cluster.py::test_the_embedded_workers_heaps_are_frozen_just_before_the_cluster_stops",
         "tests/fleet/test_fleet_population.py::test_a_local_cluster_that_does_not_start_is_one_line",
         "tests/fleet/test_fleet_population.py::test_bad_arguments_fail_before_any_worker_starts",
         "tests/fleet/test_fleet_cluster.py::test_the_docs_give_deployments_the_embedded_clusters_settings",
