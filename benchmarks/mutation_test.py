@@ -256,6 +256,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     ),
     "pipeline/fleet/report.py": (
         "tests/fleet/test_fleet_population.py",
+        "tests/fleet/test_fleet_report_mutants.py",
         "tests/fleet/test_fleet_cluster.py",
     ),
     "pipeline/fleet/task.py": (
