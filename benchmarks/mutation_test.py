@@ -261,6 +261,7 @@ TESTS: dict[str, tuple[str, ...]] = {
     ),
     "pipeline/fleet/task.py": (
         "tests/fleet/test_fleet_task.py",
+        "tests/fleet/test_fleet_task_mutants.py",
         "tests/fleet/test_fleet_population.py",
         "tests/analysis/test_workers.py",
         "tests/fleet/test_fleet_cluster.py",
