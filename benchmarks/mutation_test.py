@@ -267,6 +267,7 @@ TESTS: dict[str, tuple[str, ...]] = {
         "tests/fleet/test_fleet_cluster.py",
     ),
     "pipeline/fleet/run.py": (
+        "tests/fleet/test_fleet_run_mutants.py",
         "tests/fleet/test_fleet_population.py",
         "tests/test_cli.py",
         "tests/fleet/test_fleet_cluster.py",
