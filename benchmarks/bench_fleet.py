@@ -67,13 +67,26 @@ def _recordings(folder: Path, units: int, duration: str) -> list[Path]:
     return paths
 
 
+def _start_loop(work: Path, paths: list[Path]) -> subprocess.Popen:
+    """A child running :data:`ONE_THREAD_LOOP` over ``paths``, pinned to one thread as a
+    fleet worker is (``SINGLE_THREAD_ENV``)."""
+    return subprocess.Popen(
+        [sys.executable, "-c", ONE_THREAD_LOOP, str(work), *map(str, paths)],
+        env=os.environ | SINGLE_THREAD_ENV, stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+
+
+def _loop_seconds(child: subprocess.Popen) -> float:
+    """The timed seconds a :func:`_start_loop` child prints, once it has ended."""
+    out, _ = child.communicate()
+    if child.returncode:
+        raise RuntimeError(f"a one-thread loop failed (exit {child.returncode})")
+    return float(out.split()[-1])
+
+
 def _one_core_loop(work: Path, paths: list[Path]) -> float:
     """Seconds of the sequential loop in a child pinned to one thread, as a fleet worker runs."""
-    child = subprocess.run(
-        [sys.executable, "-c", ONE_THREAD_LOOP, str(work), *map(str, paths)],
-        env=os.environ | SINGLE_THREAD_ENV, capture_output=True, text=True, check=True,
-    )  # fmt: skip
-    return float(child.stdout.split()[-1])
+    return _loop_seconds(_start_loop(work, paths))
 
 
 def _two_loops(work: Path, paths: list[Path]) -> float:
@@ -82,21 +95,8 @@ def _two_loops(work: Path, paths: list[Path]) -> float:
     at all, the ceiling of the 2-worker fleet's speedup here.  Two analyses side by side slow
     each other down (shared cache and memory bandwidth; 1-11 % per unit in session 54's
     pairs), so on two cores the ceiling is under 2x."""
-    children = []
-    for k in (0, 1):
-        command = [sys.executable, "-c", ONE_THREAD_LOOP, str(work / str(k))]
-        children.append(
-            subprocess.Popen(
-                command + [str(p) for p in paths[k::2]],
-                env=os.environ | SINGLE_THREAD_ENV,
-                stdout=subprocess.PIPE,
-                text=True,
-            )
-        )
-    outputs = [child.communicate()[0] for child in children]
-    if any(child.returncode for child in children):
-        raise RuntimeError("a one-thread loop failed")
-    return max(float(out.split()[-1]) for out in outputs)
+    children = [_start_loop(work / str(k), paths[k::2]) for k in (0, 1)]
+    return max(_loop_seconds(child) for child in children)
 
 
 def _command_loop(work: Path, paths: list[Path]) -> float:
